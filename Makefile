@@ -1,0 +1,34 @@
+# One command sets up and runs the main job (`make run`); one sets up and runs the tests
+# (`make test`). Both create .venv on first use.
+PYTHON ?= python3
+VENV := .venv
+BIN := $(VENV)/bin
+OUT ?= out
+
+.PHONY: setup build run test test-slow bench clean
+
+$(BIN)/railfmu: pyproject.toml
+	$(PYTHON) -m venv $(VENV)
+	$(BIN)/pip install --quiet --upgrade pip
+	$(BIN)/pip install --quiet -e '.[test]'
+	touch $@
+
+setup: $(BIN)/railfmu
+
+build: setup
+	$(BIN)/railfmu build
+
+run: build
+	$(BIN)/railfmu run track_wheelset --out $(OUT)/track_wheelset
+
+test: setup
+	$(BIN)/python -m pytest -q
+
+test-slow: setup
+	$(BIN)/python -m pytest -q -m slow
+
+bench: build
+	$(BIN)/python benchmarks/step_cost.py
+
+clean:
+	rm -rf build $(OUT) .pytest_cache

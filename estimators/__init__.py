@@ -1,0 +1,1 @@
+"""Observers: filters, smoothers, identification and metrics. Import models/, never fmus/."""

@@ -1,0 +1,2 @@
+"""Everything FMI/SSP: the shared C runtime, C generation from models/, compile + package +
+validate, and (later) loading and master algorithms."""

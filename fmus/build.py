@@ -1,0 +1,149 @@
+"""Compile + package + validate: a model definition becomes a co-simulation .fmu.
+
+The archive holds modelDescription.xml, binaries/linux64/<id>.so, sources/ (everything needed
+to rebuild on another platform: runtime, generated code, FMI headers), documentation/ and
+resources/. The GUID hashes the interface and the code, so an unchanged model is not rebuilt.
+"""
+
+from __future__ import annotations
+
+import html
+import os
+import shutil
+import subprocess
+import tempfile
+import zipfile
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+
+from models.base import Model
+
+from . import codegen
+
+HERE = Path(__file__).resolve().parent
+RUNTIME_DIR = HERE / "runtime"
+CSRC_DIR = HERE / "csrc"
+DEFAULT_OUT = HERE.parent / "build" / "fmus"
+PLATFORM = "linux64"
+CFLAGS = ["-std=c99", "-O2", "-fPIC", "-shared", "-fvisibility=hidden", "-Wall", "-Wextra", "-Werror"]
+FMI_HEADERS = ["fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h"]
+_ZIP_DATE = (2020, 1, 1, 0, 0, 0)  # fixed timestamps: the same model gives the same archive
+
+
+class BuildError(RuntimeError):
+    """A model could not be generated, compiled or packaged."""
+
+
+def fmi_header_dir() -> Path:
+    import fmpy
+
+    return Path(fmpy.__file__).parent / "c-code"
+
+
+def generate_sources(model: Model) -> tuple[str, dict[str, str]]:
+    """The GUID, and file name -> text of everything in the FMU's sources/."""
+    src: dict[str, str] = {
+        "fmi2_runtime.c": (RUNTIME_DIR / "fmi2_runtime.c").read_text(),
+        "model.h": (RUNTIME_DIR / "model.h").read_text(),
+    }
+    for h in FMI_HEADERS:
+        src[h] = (fmi_header_dir() / h).read_text()
+    src[f"{model.identifier}_variables.c"] = codegen.variables_c(model)
+    if model.generated:
+        src[f"{model.identifier}_equations.c"] = codegen.equations_c(model)
+    else:
+        for name in model.c_sources:
+            path = CSRC_DIR / name
+            if not path.is_file():
+                raise BuildError(f"{model.identifier}: hand-written source {path} does not exist")
+            src[name] = path.read_text()
+    guid = codegen.guid_of(model, src)
+    src["model_config.h"] = codegen.model_config_h(model, guid)
+    return guid, src
+
+
+def _guid_of_fmu(path: Path) -> str | None:
+    try:
+        from fmpy import read_model_description
+
+        return read_model_description(str(path)).guid
+    except Exception:  # unreadable or foreign: rebuild
+        return None
+
+
+def build_fmu(model: Model, out_dir: Path | str = DEFAULT_OUT, force: bool = False) -> Path:
+    """Build ``<out_dir>/<identifier>.fmu``; returns its path. Skips the compiler when an FMU
+    with the same GUID is already there (unless ``force``)."""
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    target = out_dir / f"{model.identifier}.fmu"
+    guid, src = generate_sources(model)
+    c_files = sorted(n for n in src if n.endswith(".c"))
+    if not force and target.exists() and _guid_of_fmu(target) == guid:
+        return target
+    with tempfile.TemporaryDirectory(prefix=f"railfmu-{model.identifier}-") as tmp:
+        root = Path(tmp)
+        (root / "sources").mkdir()
+        for name, text in src.items():
+            (root / "sources" / name).write_text(text)
+        (root / "modelDescription.xml").write_text(codegen.model_description(model, guid, c_files))
+        binary = root / "binaries" / PLATFORM / f"{model.identifier}.so"
+        binary.parent.mkdir(parents=True)
+        cc = os.environ.get("CC", "gcc")
+        cmd = [cc, *CFLAGS, "-I", str(root / "sources"), "-o", str(binary),
+               *[str(root / "sources" / f) for f in c_files], "-lm"]
+        try:
+            res = subprocess.run(cmd, capture_output=True, text=True)
+        except FileNotFoundError as exc:
+            raise BuildError(f"C compiler {cc!r} not found (set CC or install gcc)") from exc
+        if res.returncode != 0:
+            raise BuildError(f"{model.identifier}: compilation failed:\n{res.stderr.strip()}")
+        doc = root / "documentation"
+        doc.mkdir()
+        (doc / "_main.html").write_text(
+            f"<html><head><meta charset='utf-8'><title>{model.identifier}</title></head><body>"
+            f"<h1>{model.identifier}</h1><p>{html.escape(model.description)}</p>"
+            f"<pre>{html.escape(model.documentation or '')}</pre></body></html>\n")
+        res_dir = root / "resources"
+        res_dir.mkdir()
+        for name, path in model.resources.items():
+            shutil.copy(path, res_dir / name)
+        tmp_fmu = out_dir / f".{model.identifier}.fmu.part"
+        with zipfile.ZipFile(tmp_fmu, "w", zipfile.ZIP_DEFLATED) as zf:
+            for path in sorted(root.rglob("*")):
+                arc = path.relative_to(root).as_posix() + ("/" if path.is_dir() else "")
+                info = zipfile.ZipInfo(arc, date_time=_ZIP_DATE)
+                if path.is_dir():
+                    info.external_attr = 0o40755 << 16
+                    zf.writestr(info, b"")
+                else:
+                    info.external_attr = (0o755 if path.suffix == ".so" else 0o644) << 16
+                    info.compress_type = zipfile.ZIP_DEFLATED
+                    zf.writestr(info, path.read_bytes())
+        tmp_fmu.replace(target)  # atomic: a reader never sees a half-written FMU
+    return target
+
+
+def build_all(out_dir: Path | str = DEFAULT_OUT, models: list[Model] | None = None,
+              force: bool = False) -> list[Path]:
+    from models import all_models
+
+    models = all_models() if models is None else models
+    with ThreadPoolExecutor(max_workers=min(4, os.cpu_count() or 1)) as pool:
+        return list(pool.map(lambda m: build_fmu(m, out_dir, force), models))
+
+
+def validate(path: Path | str) -> list[str]:
+    """FMPy's validation of modelDescription.xml plus the archive layout we promise."""
+    from fmpy.validation import validate_fmu
+
+    path = Path(path)
+    problems = list(validate_fmu(str(path)))
+    if path.is_file():
+        with zipfile.ZipFile(path) as zf:
+            names = zf.namelist()
+        if not any(n.startswith(f"binaries/{PLATFORM}/") and n.endswith(".so") for n in names):
+            problems.append(f"no binary in binaries/{PLATFORM}/")
+        if not any(n.startswith("sources/") and n.endswith(".c") for n in names):
+            problems.append("no C sources in sources/")
+    return problems

@@ -1,0 +1,328 @@
+"""Model definition (models/) -> modelDescription.xml + C sources for the shared runtime.
+
+Value references (per FMI type): Real 0 is ``time``; then Real parameters, the internal
+integrator step (models with states), inputs, states, outputs. Integer, Boolean and String
+parameters are numbered from 0 in their own types.
+
+For models with expressions, the C equations come from sympy ``ccode`` after common
+subexpression elimination, so the FMU computes exactly what :meth:`Model.rhs` lambdifies.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import uuid
+from dataclasses import dataclass
+from pathlib import Path
+from xml.sax.saxutils import quoteattr
+
+import sympy as sp
+
+from models.base import Input, Model, Output, Parameter, State, Variable
+
+from .units import UNITS, check_unit
+
+GENERATOR = "railfmu"
+TAU = sp.Symbol("tau", real=True)  # time since the start of the communication step
+LOG_CATEGORIES = {
+    "logStatusError": "Errors: bad parameters, illegal call sequences, non-finite values",
+    "logStatusWarning": "Warnings",
+    "logEvents": "Initialisation and table loading",
+    "logAll": "Everything",
+}
+INTEGRATOR_STEP = "integrator_step"
+
+
+@dataclass
+class Slot:
+    var: Variable
+    vr: int
+    causality: str
+    variability: str
+    initial: str | None
+    is_state: bool = False
+
+
+def _type(v: Variable) -> str:
+    return v.type
+
+
+def layout(model: Model) -> list[Slot]:
+    """Every ScalarVariable of the FMU in modelDescription order, with its value reference."""
+    for v in model.variables:
+        check_unit(v.unit, f"{model.identifier}.{v.name}")
+        if v.name in ("time", INTEGRATOR_STEP):
+            raise ValueError(f"{model.identifier}: variable name {v.name!r} is reserved")
+    counters = {"Real": 1, "Integer": 0, "Boolean": 0, "String": 0}
+
+    def take(t: str) -> int:
+        counters[t] += 1
+        return counters[t] - 1
+
+    slots = [Slot(Variable("time", "Simulation time", "s", None), 0, "independent", "continuous", None)]
+    for p in model.parameters:
+        var = "tunable" if p.tunable else "fixed"
+        slots.append(Slot(p, take(p.type), "parameter", var, "exact"))
+    if model.states:
+        step = Parameter(INTEGRATOR_STEP, "Fixed step of the RK4 integrator inside fmi2DoStep; a "
+                         "communication step is split into equal sub-steps no longer than this",
+                         "s", model.integrator_step, positive=True, source="numerics")
+        slots.append(Slot(step, take("Real"), "parameter", "fixed", "exact"))
+    for u in model.inputs:
+        slots.append(Slot(u, take(u.type), "input", "continuous", None))
+    for s in model.states:
+        slots.append(Slot(s, take("Real"), "output", "continuous", "exact", is_state=True))
+    for o in model.outputs:
+        slots.append(Slot(o, take(o.type), "output", "continuous", "calculated"))
+    return slots
+
+
+# -- modelDescription.xml --------------------------------------------------------------------
+def _fmt(x) -> str:
+    if isinstance(x, bool):
+        return "true" if x else "false"
+    if isinstance(x, float):
+        return repr(x)
+    return str(x)
+
+
+def _output_dependencies(model: Model, slots: list[Slot]) -> dict[str, str]:
+    """Direct feedthrough: an output depends on the inputs that appear in its expression.
+    Hand-written models declare none (pure sources), states never depend on inputs."""
+    index = {s.var.name: i + 1 for i, s in enumerate(slots)}
+    deps = {}
+    for s in slots:
+        if s.causality != "output":
+            continue
+        names = []
+        if isinstance(s.var, Output) and s.var.expr is not None:
+            free = {f.name for f in s.var.expr.free_symbols}
+            for u in model.inputs:
+                rate_used = any(v.rate == u.name and v.name in free for v in model.inputs)
+                if u.name in free or rate_used:
+                    names.append(u.name)
+        elif isinstance(s.var, Output) and model.inputs:
+            names = [u.name for u in model.inputs]  # unknown: hand-written, assume all
+        deps[s.var.name] = " ".join(str(index[n]) for n in names)
+    return deps
+
+
+def model_description(model: Model, guid: str, source_files: list[str]) -> str:
+    slots = layout(model)
+    units = sorted({s.var.unit for s in slots if s.var.unit})
+    L = ['<?xml version="1.0" encoding="UTF-8"?>',
+         f'<fmiModelDescription fmiVersion="2.0" modelName="{model.identifier}" guid="{guid}"',
+         f'  description={quoteattr(model.description)} generationTool="{GENERATOR}"',
+         '  variableNamingConvention="flat" numberOfEventIndicators="0">',
+         f'  <CoSimulation modelIdentifier="{model.identifier}" canHandleVariableCommunicationStepSize="true"',
+         '    canGetAndSetFMUstate="true" canSerializeFMUstate="true" canNotUseMemoryManagementFunctions="true"',
+         '    providesDirectionalDerivative="false" canInterpolateInputs="false" maxOutputDerivativeOrder="0">',
+         '    <SourceFiles>']
+    L += [f'      <File name="{f}"/>' for f in source_files]
+    L += ['    </SourceFiles>', '  </CoSimulation>', '  <UnitDefinitions>']
+    for u in units:
+        base = " ".join(f'{k}="{e}"' for k, e in UNITS[u].items())
+        L.append(f'    <Unit name="{u}"><BaseUnit {base}/></Unit>')
+    L += ['  </UnitDefinitions>', '  <LogCategories>']
+    L += [f'    <Category name="{n}" description={quoteattr(d)}/>' for n, d in LOG_CATEGORIES.items()]
+    L += ['  </LogCategories>', '  <ModelVariables>']
+    for i, s in enumerate(slots):
+        v = s.var
+        desc = v.description + (f" [source: {v.source}]" if v.source else "")
+        attrs = (f'name="{v.name}" valueReference="{s.vr}" description={quoteattr(desc)} '
+                 f'causality="{s.causality}" variability="{s.variability}"')
+        if s.initial and not (s.causality == "parameter"):
+            attrs += f' initial="{s.initial}"'
+        t = _type(v)
+        ta = []
+        if t == "Real" and v.unit:
+            ta.append(f'unit="{v.unit}"')
+        if t in ("Real", "Integer"):
+            if v.min is not None:
+                ta.append(f'min="{_fmt(v.min)}"')
+            if v.max is not None:
+                ta.append(f'max="{_fmt(v.max)}"')
+        if s.initial != "calculated" and s.causality != "independent":
+            ta.append(f"start={quoteattr(_fmt(v.start))}")
+        L.append(f'    <!-- {i + 1} --><ScalarVariable {attrs}><{t} {" ".join(ta)}/></ScalarVariable>')
+    L += ['  </ModelVariables>', '  <ModelStructure>', '    <Outputs>']
+    index = {s.var.name: i + 1 for i, s in enumerate(slots)}
+    deps = _output_dependencies(model, slots)
+    for s in slots:
+        if s.causality == "output":
+            L.append(f'      <Unknown index="{index[s.var.name]}" dependencies="{deps[s.var.name]}"/>')
+    L += ['    </Outputs>', '    <InitialUnknowns>']
+    for s in slots:
+        if s.causality == "output" and s.initial == "calculated":
+            L.append(f'      <Unknown index="{index[s.var.name]}"/>')
+    L += ['    </InitialUnknowns>', '  </ModelStructure>', '</fmiModelDescription>', '']
+    return "\n".join(L)
+
+
+def guid_of(model: Model, sources: dict[str, str]) -> str:
+    """Deterministic GUID: a hash of everything that defines the binary's interface and code."""
+    h = hashlib.sha256()
+    h.update(model_description(model, "", list(sources)).encode())
+    for name in sorted(sources):
+        h.update(name.encode())
+        h.update(sources[name].encode())
+    return "{" + str(uuid.UUID(bytes=h.digest()[:16], version=5)) + "}"
+
+
+# -- C ---------------------------------------------------------------------------------------
+_CAUS = {"parameter": "CAUSALITY_PARAMETER", "calculatedParameter": "CAUSALITY_CALCULATED_PARAMETER",
+         "input": "CAUSALITY_INPUT", "output": "CAUSALITY_OUTPUT", "local": "CAUSALITY_LOCAL",
+         "independent": "CAUSALITY_INDEPENDENT"}
+_VARI = {"constant": "VARIABILITY_CONSTANT", "fixed": "VARIABILITY_FIXED", "tunable": "VARIABILITY_TUNABLE",
+         "discrete": "VARIABILITY_DISCRETE", "continuous": "VARIABILITY_CONTINUOUS"}
+_PREFIX = {"Real": "VR", "Integer": "VRI", "Boolean": "VRB", "String": "VRS"}
+_ARRAY = {"Real": "r", "Integer": "i", "Boolean": "b", "String": "s"}
+
+
+def _c_string(text: str) -> str:
+    return '"' + text.replace("\\", "\\\\").replace('"', '\\"') + '"'
+
+
+def _c_start(v: Variable) -> str:
+    if v.type == "Real":
+        return "0.0" if v.start is None else repr(float(v.start))
+    if v.type == "Boolean":
+        return "fmi2True" if v.start else "fmi2False"
+    if v.type == "String":
+        return _c_string(v.start or "")
+    return str(int(v.start or 0))
+
+
+def model_config_h(model: Model, guid: str) -> str:
+    slots = layout(model)
+    n = {t: sum(1 for s in slots if s.var.type == t) for t in _PREFIX}
+    step_vr = next((s.vr for s in slots if s.var.name == INTEGRATOR_STEP), 0)
+    L = [f"/* Generated by {GENERATOR} from models/ for {model.identifier}: do not edit. */",
+         "#ifndef MODEL_CONFIG_H", "#define MODEL_CONFIG_H",
+         f"#define MODEL_IDENTIFIER {model.identifier}", f'#define MODEL_GUID "{guid}"',
+         f"#define N_REAL {n['Real']}", f"#define N_INTEGER {n['Integer']}",
+         f"#define N_BOOLEAN {n['Boolean']}", f"#define N_STRING {n['String']}",
+         f"#define N_STATES {len(model.states)}", f"#define VR_INTEGRATOR_STEP {step_vr}"]
+    for s in slots[1:]:
+        L.append(f"#define {_PREFIX[s.var.type]}_{s.var.name} {s.vr}")
+    L += ["#endif", ""]
+    return "\n".join(L)
+
+
+def variables_c(model: Model) -> str:
+    """Variable tables (names, causality, variability, start values) and the state list."""
+    slots = layout(model)
+    L = [f"/* Generated by {GENERATOR} from models/ for {model.identifier}: do not edit. */",
+         '#include "model.h"', ""]
+    for t, ctype in [("Real", "fmi2Real"), ("Integer", "fmi2Integer"), ("Boolean", "fmi2Boolean"),
+                     ("String", "char *")]:
+        of_type = [s for s in slots if s.var.type == t]
+        if not of_type:
+            continue
+        name = t.lower()
+        L.append(f"const VariableInfo model_{name}_info[N_{t.upper()}] = {{")
+        L += [f'    {{"{s.var.name}", {_CAUS[s.causality]}, {_VARI[s.variability]}}},' for s in of_type]
+        L.append("};")
+        decl = "const char *const" if t == "String" else f"const {ctype}"
+        L.append(f"{decl} model_{name}_start[N_{t.upper()}] = {{")
+        L += [f"    {_c_start(s.var)}, /* {s.var.name} */" for s in of_type]
+        L += ["};", ""]
+    if model.states:
+        vrs = ", ".join(f"VR_{s.name}" for s in model.states)
+        L += [f"const fmi2ValueReference model_state_vrs[N_STATES] = {{{vrs}}};", ""]
+    return "\n".join(L)
+
+
+def _c_name(v: Variable) -> str:
+    return "v_" + v.name
+
+
+def _check_parameters_c(model: Model) -> list[str]:
+    """Range checks of Real parameters, from a table (lower bound, upper bound, strict >)."""
+    rows = []
+    for p in model.parameters:
+        if p.type == "Real":
+            lo = 0.0 if p.positive else (-1e308 if p.min is None else float(p.min))
+            hi = 1e308 if p.max is None else float(p.max)
+            rows.append(f'        {{VR_{p.name}, "{p.name}", {lo!r}, {hi!r}, {int(p.positive)}}},')
+    if not rows:
+        return ["int model_check_parameters(ModelInstance *m) {", "    (void)m;", "    return 0;", "}", ""]
+    return [
+        "int model_check_parameters(ModelInstance *m) {",
+        "    static const struct { fmi2ValueReference vr; const char *name; double lo, hi; int strict; } c[] = {",
+        *rows,
+        "    };",
+        "    for (size_t k = 0; k < sizeof c / sizeof c[0]; k++) {",
+        "        const double v = m->r[c[k].vr];",
+        "        if (!isfinite(v)) {",
+        '            model_error(m, "parameter %s = %g is not finite", c[k].name, v);',
+        "            return 1;",
+        "        }",
+        "        if (c[k].strict ? !(v > c[k].lo) : !(v >= c[k].lo)) {",
+        '            model_error(m, "parameter %s = %g must be %s %g", c[k].name, v, c[k].strict ? ">" : ">=", c[k].lo);',
+        "            return 1;",
+        "        }",
+        "        if (!(v <= c[k].hi)) {",
+        '            model_error(m, "parameter %s = %g must be <= %g", c[k].name, v, c[k].hi);',
+        "            return 1;",
+        "        }",
+        "    }",
+        "    return 0;",
+        "}",
+        "",
+    ]
+
+
+def _assign_block(model: Model, exprs: list[sp.Expr], targets: list[str],
+                  source: dict[str, str]) -> tuple[list[str], set[str]]:
+    """C statements computing ``targets[i] = exprs[i]`` with shared subexpressions hoisted.
+    Only the model variables an expression uses are read (so -Wunused stays quiet); ``source``
+    maps a variable name to the C lvalue it is read from. Returns the lines and the names of
+    the free symbols that are not model variables (``t``, ``tau``)."""
+    rename = {v.symbol: sp.Symbol(_c_name(v), real=True) for v in model.variables}
+    rename[TAU] = sp.Symbol("v_tau", real=True)
+    exprs = [sp.sympify(e).xreplace(rename) for e in exprs]
+    subexprs, reduced = sp.cse(exprs, symbols=sp.numbered_symbols("w"), optimizations="basic")
+    used = set().union(*[e.free_symbols for e in exprs]) if exprs else set()
+    L = [f"    const double {_c_name(v)} = {source[v.name]};" for v in model.variables if rename[v.symbol] in used]
+    L += [f"    const double {w} = {sp.ccode(e)};" for w, e in subexprs]
+    L += [f"    {tgt} = {sp.ccode(e)};" for tgt, e in zip(targets, reduced)]
+    model_syms = set(rename.values()) - {rename[TAU]}
+    return L, {s.name for s in used - model_syms}
+
+
+def equations_c(model: Model) -> str:
+    """model_* functions for a model defined by expressions."""
+    state_index = {s.name: k for k, s in enumerate(model.states)}
+
+    def source(in_derivatives: bool) -> dict[str, str]:
+        src = {v.name: f"m->{_ARRAY[v.type]}[{_PREFIX[v.type]}_{v.name}]" for v in model.variables}
+        if in_derivatives:
+            src.update({n: f"x[{k}]" for n, k in state_index.items()})
+        return src
+
+    L = [f"/* Generated by {GENERATOR} from models/ for {model.identifier}: do not edit. */",
+         "#include <math.h>", '#include "model.h"', ""]
+    L += _check_parameters_c(model)
+    L += ["int model_initialize(ModelInstance *m) {", "    (void)m;", "    return 0;", "}", ""]
+    # derivatives: states from x[], inputs held over the step, or first-order hold with a rate
+    ders = model.derivative_exprs(hold_tau=TAU)
+    body, free = _assign_block(model, ders, [f"dx[{k}]" for k in range(len(ders))], source(True))
+    L.append("void model_derivatives(ModelInstance *m, double t, const double *x, double *dx) {")
+    if "v_tau" in free:
+        L.append("    const double v_tau = t - m->r[0]; /* time since the communication point */")
+    if "t" not in free and "v_tau" not in free:
+        L.append("    (void)t;")
+    if not model.states:
+        L.append("    (void)m; (void)x; (void)dx;")
+    L += body + ["}", ""]
+    # outputs at the communication point (inputs as set: tau = 0)
+    body, free = _assign_block(model, [o.expr for o in model.outputs],
+                               [f"m->r[VR_{o.name}]" for o in model.outputs], source(False))
+    L.append("int model_outputs(ModelInstance *m) {")
+    if "t" in free:
+        L.append("    const double t = m->r[0];")
+    L += body + ["    return 0;", "}", ""]
+    L += ["int model_state_restored(ModelInstance *m) {", "    (void)m;", "    return 0;", "}", "",
+          "void model_free(ModelInstance *m) {", "    (void)m;", "}", ""]
+    return "\n".join(L)

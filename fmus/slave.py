@@ -1,0 +1,128 @@
+"""Load one co-simulation FMU through FMPy with its log messages captured.
+
+The FMU reports what went wrong (a bad parameter, an illegal call) through the logger
+callback; :class:`Slave` keeps those messages so the importer can raise an error that says
+why, instead of FMPy's bare "fmi2ExitInitializationMode failed with status 3".
+"""
+
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+
+from fmpy import calloc, extract, free, read_model_description
+from fmpy.fmi1 import FMICallException
+from fmpy.fmi2 import (FMU2Slave, fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFreeMemoryTYPE,
+                       fmi2CallbackFunctions, fmi2CallbackLoggerTYPE)
+
+from .errors import UserError
+
+_STATUS = ["OK", "Warning", "Discard", "Error", "Fatal", "Pending"]
+
+
+class FMUError(UserError):
+    """An FMI call failed; the message carries what the FMU logged."""
+
+
+class Slave:
+    """An instantiated FMI 2.0 co-simulation FMU; ``messages`` holds (status, category, text)."""
+
+    def __init__(self, fmu: Path | str, instance_name: str = "instance", logging_on: bool = False):
+        fmu = Path(fmu)
+        if not fmu.is_file():
+            raise UserError(f"{fmu}: FMU not found (run `railfmu build`)")
+        self.path = fmu
+        self.name = instance_name
+        self.md = read_model_description(str(fmu))
+        self.vars = {v.name: v for v in self.md.modelVariables}
+        self.dir = extract(str(fmu))
+        self.messages: list[tuple[str, str, str]] = []
+        self.fmu = FMU2Slave(guid=self.md.guid, unzipDirectory=self.dir,
+                             modelIdentifier=self.md.coSimulation.modelIdentifier,
+                             instanceName=instance_name)
+        self._callbacks = self._make_callbacks()
+        self.fmu.instantiate(callbacks=self._callbacks, loggingOn=logging_on)
+
+    def _make_callbacks(self) -> fmi2CallbackFunctions:
+        def log(_env, _name, status, category, message):
+            self.messages.append((_STATUS[status] if 0 <= status < 6 else str(status),
+                                  (category or b"").decode(errors="replace"),
+                                  (message or b"").decode(errors="replace")))
+
+        cb = fmi2CallbackFunctions()
+        cb.logger = fmi2CallbackLoggerTYPE(log)
+        cb.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
+        cb.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
+        try:  # formats printf-style arguments before they reach Python
+            from fmpy.logging import addLoggerProxy
+
+            addLoggerProxy(cb)
+        except Exception:
+            pass
+        self._keep = log  # the C side holds a pointer: keep the Python function alive
+        return cb
+
+    # -- calls that turn a failed status into an error with the FMU's own words --------------
+    def call(self, what: str, fn, *args):
+        n = len(self.messages)
+        try:
+            return fn(*args)
+        except FMICallException as exc:
+            logged = "; ".join(m for s, _, m in self.messages[n:] if s in ("Error", "Fatal"))
+            raise FMUError(f"{self.path.name} ({self.name}): {what} failed: "
+                           f"{logged or exc}") from None
+
+    def var(self, name: str):
+        try:
+            return self.vars[name]
+        except KeyError:
+            raise UserError(f"{self.path.name} ({self.name}): no variable {name!r}") from None
+
+    def set(self, name: str, value) -> None:
+        v = self.var(name)
+        f = self.fmu
+        setter, conv = {"Real": (f.setReal, float), "Integer": (f.setInteger, int),
+                        "Boolean": (f.setBoolean, bool), "String": (f.setString, str)}[v.type]
+        self.call(f"setting {name}", setter, [v.valueReference], [conv(value)])
+
+    def get(self, name: str):
+        v = self.var(name)
+        f = self.fmu
+        getter = {"Real": f.getReal, "Integer": f.getInteger, "Boolean": f.getBoolean,
+                  "String": f.getString}[v.type]
+        return self.call(f"reading {name}", getter, [v.valueReference])[0]
+
+    def enter_initialization(self, start_time: float = 0.0, stop_time: float | None = None) -> None:
+        self.call("fmi2SetupExperiment", self.fmu.setupExperiment, None, start_time, stop_time)
+        self.call("fmi2EnterInitializationMode", self.fmu.enterInitializationMode)
+
+    def exit_initialization(self) -> None:
+        self.call("fmi2ExitInitializationMode", self.fmu.exitInitializationMode)
+
+    def initialize(self, start_time: float = 0.0, stop_time: float | None = None,
+                   parameters: dict | None = None) -> None:
+        """Setup, set parameters (name -> value), end initialisation."""
+        self.enter_initialization(start_time, stop_time)
+        for k, v in (parameters or {}).items():
+            self.set(k, v)
+        self.exit_initialization()
+
+    def do_step(self, t: float, h: float) -> None:
+        self.call(f"fmi2DoStep at t = {t:.9g} s", self.fmu.doStep, t, h)
+
+    def close(self) -> None:
+        try:
+            if self.fmu.component is not None:
+                self.fmu.terminate()
+                self.fmu.freeInstance()
+        except Exception:
+            pass
+        finally:
+            shutil.rmtree(self.dir, ignore_errors=True)
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+

@@ -1,0 +1,18 @@
+"""railfmu physics: one definition per model (parameters with units and sources, equations).
+
+Imports numpy/scipy/sympy only. Each model is the single source for its FMU (fmus/) and for
+any estimator's design model (estimators/).
+"""
+
+from .base import Input, Model, Output, Parameter, State, Variable
+
+
+def all_models() -> list[Model]:
+    """Every model that is built into an FMU, in build order."""
+    from .track import TRACK
+    from .wheelset import WHEELSET
+
+    return [TRACK, WHEELSET]
+
+
+__all__ = ["Input", "Model", "Output", "Parameter", "State", "Variable", "all_models"]

@@ -1,0 +1,189 @@
+"""One definition per model: its variables (with units, descriptions, sources) and equations.
+
+A :class:`Model` is the single source for
+
+* its FMU: ``fmus.codegen`` turns the variables into ``modelDescription.xml`` and the
+  equations into C (sympy ``ccode``);
+* Python: :meth:`Model.rhs` and :meth:`Model.outputs` lambdify the same expressions, so a
+  test can solve the definition with scipy and compare it with the compiled FMU, and an
+  estimator can take its design matrices from :meth:`Model.linearize`.
+
+Models whose code cannot be written as closed-form expressions (the track generator) set
+``c_sources`` to hand-written C; their variables are still declared here, and a test proves
+the C equals the Python implementation.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable, Mapping, Sequence
+
+import numpy as np
+import sympy as sp
+
+
+@dataclass
+class Variable:
+    """An FMU variable. ``unit`` is an FMI unit name ('' = dimensionless); ``source`` says where
+    a parameter's value comes from (seed table, benchmark vehicle, standard)."""
+
+    name: str
+    description: str
+    unit: str = ""
+    start: float | int | bool | str | None = 0.0
+    type: str = "Real"  # Real | Integer | Boolean | String
+    source: str = ""
+    min: float | None = None
+    max: float | None = None
+    positive: bool = False  # must be > 0 (a mass, a stiffness): checked when initialisation ends
+
+    @property
+    def symbol(self) -> sp.Symbol:
+        return sp.Symbol(self.name, real=True)
+
+
+@dataclass
+class Parameter(Variable):
+    """A parameter the importer may set before initialisation (``tunable``: also during the run).
+    ``min``/``max`` are checked when initialisation ends: a violation is an fmi2Error with a
+    logged message naming the parameter."""
+
+    tunable: bool = False
+
+
+@dataclass
+class Input(Variable):
+    """A continuous input. With ``rate`` naming another input that carries its time
+    derivative, the FMU extrapolates the input linearly over a communication step
+    (first-order hold) instead of holding it."""
+
+    rate: str | None = None
+
+
+@dataclass
+class State(Variable):
+    """A continuous state; also an output (initial='exact'), so its start value is the initial
+    condition the importer may set. ``der`` is the time derivative as a sympy expression."""
+
+    der: sp.Expr | None = None
+
+
+@dataclass
+class Output(Variable):
+    """An output computed from states, inputs and parameters (``expr``), or by hand-written C."""
+
+    expr: sp.Expr | None = None
+    start: float | int | bool | str | None = None
+
+
+@dataclass
+class Model:
+    identifier: str  # FMI modelIdentifier: a C identifier, also the .fmu file name
+    description: str
+    parameters: list[Parameter] = field(default_factory=list)
+    inputs: list[Input] = field(default_factory=list)
+    states: list[State] = field(default_factory=list)
+    outputs: list[Output] = field(default_factory=list)
+    integrator_step: float = 1e-4  # s, default of the internal RK4 step parameter
+    c_sources: list[Path] = field(default_factory=list)  # hand-written C, if not generated
+    resources: dict[str, Path] = field(default_factory=dict)  # name in resources/ -> file
+    documentation: str = ""  # the model's equations, for the FMU's documentation/
+
+    # -- structure ---------------------------------------------------------------------------
+    def __post_init__(self) -> None:
+        names = [v.name for v in self.variables]
+        dup = {n for n in names if names.count(n) > 1}
+        if dup:
+            raise ValueError(f"model {self.identifier}: duplicate variable names {sorted(dup)}")
+        known = {v.name for v in self.inputs}
+        for u in self.inputs:
+            if u.rate is not None and u.rate not in known:
+                raise ValueError(f"model {self.identifier}: input {u.name} has unknown rate {u.rate}")
+
+    @property
+    def variables(self) -> list[Variable]:
+        return [*self.parameters, *self.inputs, *self.states, *self.outputs]
+
+    @property
+    def generated(self) -> bool:
+        """True when the model's C code is generated from its expressions."""
+        return not self.c_sources
+
+    def variable(self, name: str) -> Variable:
+        for v in self.variables:
+            if v.name == name:
+                return v
+        raise KeyError(f"model {self.identifier} has no variable {name!r}")
+
+    def default_parameters(self) -> dict[str, float]:
+        return {p.name: p.start for p in self.parameters}
+
+    def check_parameters(self, params: Mapping[str, float]) -> None:
+        """The same range checks the FMU applies when initialisation ends."""
+        for p in self.parameters:
+            v = params.get(p.name, p.start)
+            if p.min is not None and not v >= p.min:
+                raise ValueError(f"{self.identifier}: parameter {p.name} = {v} is below its minimum {p.min}")
+            if p.positive and not v > 0:
+                raise ValueError(f"{self.identifier}: parameter {p.name} = {v} must be > 0")
+            if p.max is not None and not v <= p.max:
+                raise ValueError(f"{self.identifier}: parameter {p.name} = {v} is above its maximum {p.max}")
+
+    # -- numerics (generated models) -------------------------------------------------------
+    def _substitute_held_inputs(self, expr: sp.Expr, tau: sp.Symbol) -> sp.Expr:
+        """u -> u + u_rate * tau for inputs with a rate (first-order hold over a step)."""
+        subs = {u.symbol: u.symbol + self.variable(u.rate).symbol * tau for u in self.inputs if u.rate}
+        return expr.subs(subs)
+
+    def derivative_exprs(self, hold_tau: sp.Symbol | None = None) -> list[sp.Expr]:
+        exprs = [s.der for s in self.states]
+        if hold_tau is not None:
+            exprs = [self._substitute_held_inputs(e, hold_tau) for e in exprs]
+        return exprs
+
+    def _args(self) -> list[sp.Symbol]:
+        return [sp.Symbol("t", real=True), *[s.symbol for s in self.states],
+                *[u.symbol for u in self.inputs], *[p.symbol for p in self.parameters]]
+
+    def _lambdify(self, exprs: Sequence[sp.Expr]) -> Callable:
+        return sp.lambdify(self._args(), list(exprs), modules="numpy")
+
+    def _call(self, fn: Callable, t: float, x, u: Mapping[str, float] | None, p: Mapping[str, float] | None):
+        p = {**self.default_parameters(), **(p or {})}
+        u = {**{v.name: v.start for v in self.inputs}, **(u or {})}
+        return fn(t, *x, *[u[v.name] for v in self.inputs], *[p[v.name] for v in self.parameters])
+
+    def rhs(self, p: Mapping[str, float] | None = None, u: Callable[[float], Mapping[str, float]] | None = None):
+        """Return f(t, x) for scipy.integrate.solve_ivp; ``u(t)`` gives the inputs by name."""
+        fn = self._lambdify(self.derivative_exprs())
+
+        def f(t, x):
+            return np.asarray(self._call(fn, t, x, u(t) if u else None, p), dtype=float)
+
+        return f
+
+    def outputs_at(self, t: float, x, u: Mapping[str, float] | None = None,
+                   p: Mapping[str, float] | None = None) -> dict[str, float]:
+        """All outputs (states included) at one instant."""
+        fn = self._lambdify([o.expr for o in self.outputs])
+        vals = self._call(fn, t, x, u, p)
+        out = {s.name: float(xi) for s, xi in zip(self.states, x)}
+        out.update({o.name: float(v) for o, v in zip(self.outputs, vals)})
+        return out
+
+    def linearize(self, p: Mapping[str, float] | None = None):
+        """(A, B, C, D) of dx = A x + B u, y = C x + D u about x = 0, u = 0, with the given
+        parameters; B and D columns follow ``self.inputs``, C and D rows ``self.outputs``."""
+        x = [s.symbol for s in self.states]
+        u = [v.symbol for v in self.inputs]
+        f = sp.Matrix(self.derivative_exprs())
+        g = sp.Matrix([o.expr for o in self.outputs])
+        pv = {**self.default_parameters(), **(p or {})}
+        subs = {q.symbol: pv[q.name] for q in self.parameters}
+        zero = {s: 0 for s in [*x, *u]}
+
+        def num(m):
+            return np.array(m.subs(subs).subs(zero), dtype=float)
+
+        return num(f.jacobian(x)), num(f.jacobian(u)), num(g.jacobian(x)), num(g.jacobian(u))
