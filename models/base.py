@@ -146,8 +146,11 @@ class Model:
         return [sp.Symbol("t", real=True), *[s.symbol for s in self.states],
                 *[u.symbol for u in self.inputs], *[p.symbol for p in self.parameters]]
 
-    def _lambdify(self, exprs: Sequence[sp.Expr]) -> Callable:
-        return sp.lambdify(self._args(), list(exprs), modules="numpy")
+    def _lambdify(self, key: str, exprs: Sequence[sp.Expr]) -> Callable:
+        cache = self.__dict__.setdefault("_compiled", {})
+        if key not in cache:  # lambdify is slow; the expressions never change
+            cache[key] = sp.lambdify(self._args(), list(exprs), modules="numpy", cse=True)
+        return cache[key]
 
     def _call(self, fn: Callable, t: float, x, u: Mapping[str, float] | None, p: Mapping[str, float] | None):
         p = {**self.default_parameters(), **(p or {})}
@@ -156,7 +159,7 @@ class Model:
 
     def rhs(self, p: Mapping[str, float] | None = None, u: Callable[[float], Mapping[str, float]] | None = None):
         """Return f(t, x) for scipy.integrate.solve_ivp; ``u(t)`` gives the inputs by name."""
-        fn = self._lambdify(self.derivative_exprs())
+        fn = self._lambdify("rhs", self.derivative_exprs())
 
         def f(t, x):
             return np.asarray(self._call(fn, t, x, u(t) if u else None, p), dtype=float)
@@ -166,7 +169,7 @@ class Model:
     def outputs_at(self, t: float, x, u: Mapping[str, float] | None = None,
                    p: Mapping[str, float] | None = None) -> dict[str, float]:
         """All outputs (states included) at one instant."""
-        fn = self._lambdify([o.expr for o in self.outputs])
+        fn = self._lambdify("outputs", [o.expr for o in self.outputs])
         vals = self._call(fn, t, x, u, p)
         out = {s.name: float(xi) for s, xi in zip(self.states, x)}
         out.update({o.name: float(v) for o, v in zip(self.outputs, vals)})

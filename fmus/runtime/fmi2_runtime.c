@@ -1,0 +1,1457 @@
+/* railfmu: shared FMI 2.0 Co-Simulation runtime.
+ *
+ * Compiled together with one model's code (see model.h) into <MODEL_IDENTIFIER>.so:
+ *
+ *   gcc -std=c99 -shared -fPIC -O2 -Wall -Wextra -Werror -I<fmi2 headers> \
+ *       -I<dir with model_config.h> -I<this dir> fmi2_runtime.c <model>.c -o <id>.so
+ *
+ * What it does:
+ *   - the FMI 2.0 Co-Simulation state machine (FMI 2.0.4, section 4.2.4, table of allowed
+ *     calls per state); every illegal call returns fmi2Error and logs a message
+ *     (category "logStatusError") naming the function and the current state;
+ *   - get/set of variables by value reference, with the settability rules of
+ *     section 2.2.7 (causality/variability/initial) and the per-state footnotes of 4.2.4;
+ *   - fmi2DoStep integrates the continuous states with classic fixed-step RK4: the
+ *     communication step h is split into n = ceil(h / r[VR_INTEGRATOR_STEP] - 1e-9) equal
+ *     sub-steps, so every step lands exactly on t + h;
+ *   - errors are fmi2Error (never fmi2Fatal, never fmi2Discard from fmi2DoStep); the
+ *     instance stays usable after a refused call that changed nothing (wrong state, bad
+ *     argument, bad parameter at fmi2ExitInitializationMode) and goes to state Error when a
+ *     step failed half-way (non-finite state or output), from where fmi2SetFMUstate or
+ *     fmi2Reset bring it back;
+ *   - FMU state get/set/serialize (canGetAndSetFMUstate, canSerializeFMUstate).
+ *
+ * No global mutable state: everything lives in the instance, so several instances of the
+ * same FMU can run in one process. All memory comes from the C library (calloc/free), never
+ * from the allocateMemory/freeMemory callbacks (some importers pass NULL): the
+ * modelDescription.xml must therefore declare canNotUseMemoryManagementFunctions="true"
+ * (FMI 2.0.4, section 4.3.1), as well as canGetAndSetFMUstate="true",
+ * canSerializeFMUstate="true" and canHandleVariableCommunicationStepSize="true".
+ */
+
+#include <stdarg.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <math.h>
+
+#include "model.h"
+
+#if N_REAL < 1
+#error "N_REAL must be at least 1: real value reference 0 is time"
+#endif
+#if N_STATES > 0 && !defined(VR_INTEGRATOR_STEP)
+#error "a model with states must define VR_INTEGRATOR_STEP"
+#endif
+
+#define STRINGIFY_(x) #x
+#define STRINGIFY(x) STRINGIFY_(x)
+#define MODEL_NAME STRINGIFY(MODEL_IDENTIFIER)
+
+/* ---- the instance ------------------------------------------------------------------- */
+
+/* Log categories declared in modelDescription.xml (<LogCategories>), as bits. */
+enum {
+    LOG_STATUS_ERROR = 1u << 0,
+    LOG_STATUS_WARNING = 1u << 1,
+    LOG_EVENTS = 1u << 2,
+    LOG_ALL = 1u << 3,
+    LOG_CATEGORIES_ALL = (1u << 4) - 1u
+};
+
+static const struct {
+    const char *name;
+    unsigned bit;
+} log_categories[] = {
+    {"logStatusError", LOG_STATUS_ERROR},
+    {"logStatusWarning", LOG_STATUS_WARNING},
+    {"logEvents", LOG_EVENTS},
+    {"logAll", LOG_ALL},
+};
+#define N_LOG_CATEGORIES (sizeof(log_categories) / sizeof(log_categories[0]))
+
+/* What fmi2Component points to. The model only sees the ModelInstance (first member, so a
+   ModelInstance* from the model converts back); the rest is private to the runtime. */
+typedef struct {
+    ModelInstance m;
+    fmi2CallbackFunctions callbacks; /* a copy: the importer's struct may not outlive us */
+    unsigned logMask;                /* enabled LOG_* categories (errors are always logged) */
+    int outputsStale;                /* an input or tunable parameter changed since the outputs
+                                        were computed: recompute before the next get */
+} Instance;
+
+/* A saved FMU state (fmi2GetFMUstate). Everything a continuation depends on: modelData is
+   derived from parameters and rebuilt by model_state_restored (see model.h). */
+#define SNAPSHOT_MAGIC 0x52464d53u /* "RFMS" */
+typedef struct {
+    unsigned magic;
+    ModelState state;
+    double startTime;
+    double stopTime;
+    fmi2Boolean stopTimeDefined;
+    double lastSuccessfulTime;
+    fmi2Real r[N_REAL];
+#if N_INTEGER > 0
+    fmi2Integer i[N_INTEGER];
+#endif
+#if N_BOOLEAN > 0
+    fmi2Boolean b[N_BOOLEAN];
+#endif
+#if N_STRING > 0
+    char *s[N_STRING];
+#endif
+} Snapshot;
+
+/* ---- small helpers ------------------------------------------------------------------ */
+
+static double abs_d(double x) { return x < 0 ? -x : x; }
+static double max_d(double a, double b) { return a > b ? a : b; }
+
+/* a == b up to a relative 1e-9 (scaled by max(1, |a|, |b|)): importers accumulate time
+   in their own way */
+#define TIME_EPS 1e-9
+static int time_close(double a, double b) {
+    return abs_d(a - b) <= TIME_EPS * max_d(1.0, max_d(abs_d(a), abs_d(b)));
+}
+
+/* strdup is POSIX, not C99 */
+static char *dup_string(const char *s) {
+    size_t n;
+    char *d;
+    if (!s) s = "";
+    n = strlen(s) + 1;
+    d = (char *)malloc(n);
+    if (d) memcpy(d, s, n);
+    return d;
+}
+
+static const char *state_name(ModelState s) {
+    switch (s) {
+    case STATE_INSTANTIATED: return "Instantiated";
+    case STATE_INITIALIZATION_MODE: return "InitializationMode";
+    case STATE_STEP_COMPLETE: return "StepComplete";
+    case STATE_STEP_FAILED: return "StepFailed";
+    case STATE_TERMINATED: return "Terminated";
+    case STATE_ERROR: return "Error";
+    case STATE_FATAL: return "Fatal";
+    }
+    return "?";
+}
+
+static const char *causality_name(Causality c) {
+    switch (c) {
+    case CAUSALITY_PARAMETER: return "parameter";
+    case CAUSALITY_CALCULATED_PARAMETER: return "calculatedParameter";
+    case CAUSALITY_INPUT: return "input";
+    case CAUSALITY_OUTPUT: return "output";
+    case CAUSALITY_LOCAL: return "local";
+    case CAUSALITY_INDEPENDENT: return "independent";
+    }
+    return "?";
+}
+
+static int is_valid_state(int s) {
+    return s == STATE_INSTANTIATED || s == STATE_INITIALIZATION_MODE ||
+           s == STATE_STEP_COMPLETE || s == STATE_STEP_FAILED || s == STATE_TERMINATED ||
+           s == STATE_ERROR || s == STATE_FATAL;
+}
+
+/* ---- logging (provided to the model, see model.h) ----------------------------------- */
+
+static unsigned category_bit(const char *category) {
+    size_t k;
+    if (category) {
+        for (k = 0; k < N_LOG_CATEGORIES; k++) {
+            if (strcmp(category, log_categories[k].name) == 0) return log_categories[k].bit;
+        }
+    }
+    return LOG_ALL; /* an undeclared category is only shown with logAll */
+}
+
+static void vlog(const char *instanceName, const fmi2CallbackFunctions *functions,
+                 fmi2Status status, const char *category, const char *fmt, va_list ap) {
+    char small[512];
+    char *buf = small;
+    int n;
+    va_list ap2;
+
+    if (!functions || !functions->logger) return; /* no logger: be silent */
+    va_copy(ap2, ap);
+    n = vsnprintf(small, sizeof small, fmt, ap);
+    if (n >= (int)sizeof small) {
+        buf = (char *)malloc((size_t)n + 1);
+        if (buf) {
+            vsnprintf(buf, (size_t)n + 1, fmt, ap2);
+        } else {
+            buf = small; /* truncated message rather than none */
+        }
+    } else if (n < 0) {
+        strcpy(small, "(message formatting failed)");
+    }
+    va_end(ap2);
+    /* The logger treats its message argument as a printf format (FMI 2.0.4, 2.1.5). We pass
+       the finished text, with '%' doubled and no variadic arguments: importers that format
+       print it as it is, and those that cannot read varargs (ctypes loggers) still get it. */
+    {
+        size_t len = strlen(buf), pct = 0, j = 0, k;
+        char *esc;
+        for (k = 0; k < len; k++) pct += buf[k] == '%';
+        esc = pct ? (char *)malloc(len + pct + 1) : buf;
+        if (esc) {
+            if (pct) {
+                for (k = 0; k < len; k++) {
+                    esc[j++] = buf[k];
+                    if (buf[k] == '%') esc[j++] = '%';
+                }
+                esc[j] = '\0';
+            }
+            functions->logger(functions->componentEnvironment, instanceName ? instanceName : "",
+                              status, category ? category : "logAll", esc);
+            if (esc != buf) free(esc);
+        }
+    }
+    if (buf != small) free(buf);
+}
+
+void model_log(ModelInstance *m, fmi2Status status, const char *category, const char *fmt, ...) {
+    const Instance *inst = (const Instance *)m;
+    va_list ap;
+
+    if (!m) return;
+    /* errors are always passed on; everything else only with debug logging on for the
+       category (FMI 2.0.4, 2.1.5: fmi2SetDebugLogging) */
+    if (status < fmi2Error) {
+        if (!m->loggingOn || !(inst->logMask & category_bit(category))) return;
+    }
+    va_start(ap, fmt);
+    vlog(m->instanceName, m->functions, status, category, fmt, ap);
+    va_end(ap);
+}
+
+/* before an instance exists (fmi2Instantiate) */
+static void log_early(const char *instanceName, const fmi2CallbackFunctions *functions,
+                      const char *fmt, ...)
+#if defined(__GNUC__)
+    __attribute__((format(printf, 3, 4)))
+#endif
+    ;
+static void log_early(const char *instanceName, const fmi2CallbackFunctions *functions,
+                      const char *fmt, ...) {
+    va_list ap;
+    va_start(ap, fmt);
+    vlog(instanceName, functions, fmi2Error, "logStatusError", fmt, ap);
+    va_end(ap);
+}
+
+/* ---- resource paths (provided to the model, see model.h) ---------------------------- */
+
+static int hex_value(char c) {
+    if (c >= '0' && c <= '9') return c - '0';
+    if (c >= 'a' && c <= 'f') return c - 'a' + 10;
+    if (c >= 'A' && c <= 'F') return c - 'A' + 10;
+    return -1;
+}
+
+static int is_absolute_path(const char *p) {
+    if (p[0] == '/' || p[0] == '\\') return 1;
+    /* Windows drive letter "C:\..." or "C:/..." */
+    if (((p[0] >= 'a' && p[0] <= 'z') || (p[0] >= 'A' && p[0] <= 'Z')) && p[1] == ':' &&
+        (p[2] == '/' || p[2] == '\\'))
+        return 1;
+    return 0;
+}
+
+/* The resource location is a URI (FMI 2.0.4, 2.1.5: "file:///C:/a/b/resources" or
+   "file:/tmp/x/resources"; importers differ in the number of slashes and may add the host
+   "localhost"). Returns the decoded file system path (malloc'ed), or NULL. */
+static char *resource_dir(const char *uri) {
+    const char *p = uri;
+    char *out, *o;
+
+    if (strncmp(p, "file:", 5) == 0) {
+        p += 5;
+        if (strncmp(p, "//", 2) == 0) {
+            p += 2; /* authority follows: empty ("file:///x") or "localhost" */
+            if (strncmp(p, "localhost", 9) == 0) p += 9;
+            if (*p != '/') return NULL; /* a remote host: not a local file */
+        }
+        /* "/C:/x" -> "C:/x" on Windows */
+        if (p[0] == '/' && p[1] && p[2] == ':' &&
+            ((p[1] >= 'a' && p[1] <= 'z') || (p[1] >= 'A' && p[1] <= 'Z')))
+            p++;
+    }
+    /* else: some importers pass a plain path; take it as it is */
+
+    out = (char *)malloc(strlen(p) + 1);
+    if (!out) return NULL;
+    for (o = out; *p; p++) {
+        int hi, lo;
+        if (*p == '%' && (hi = hex_value(p[1])) >= 0 && (lo = hex_value(p[2])) >= 0) {
+            *o++ = (char)(hi * 16 + lo);
+            p += 2;
+        } else {
+            *o++ = *p;
+        }
+    }
+    *o = '\0';
+    return out;
+}
+
+char *model_resolve_path(ModelInstance *m, const char *path) {
+    char *dir, *out;
+    size_t nd, np;
+    int slash;
+
+    if (!m || !path || !*path) return NULL;
+    if (is_absolute_path(path)) return dup_string(path);
+    if (!m->resourceLocation || !*m->resourceLocation) return NULL;
+    dir = resource_dir(m->resourceLocation);
+    if (!dir) return NULL;
+    nd = strlen(dir);
+    np = strlen(path);
+    slash = nd > 0 && (dir[nd - 1] == '/' || dir[nd - 1] == '\\');
+    out = (char *)malloc(nd + np + 2);
+    if (out) {
+        memcpy(out, dir, nd);
+        if (!slash) out[nd++] = '/';
+        memcpy(out + nd, path, np + 1);
+    }
+    free(dir);
+    return out;
+}
+
+/* ---- state machine ------------------------------------------------------------------ */
+
+/* Allowed states per function: FMI 2.0.4, section 4.2.4, state table of the slave. */
+#define ANY_BUT_FATAL                                                                      \
+    (STATE_INSTANTIATED | STATE_INITIALIZATION_MODE | STATE_STEP_COMPLETE |                \
+     STATE_STEP_FAILED | STATE_TERMINATED | STATE_ERROR)
+#define MASK_SetDebugLogging ANY_BUT_FATAL
+#define MASK_SetupExperiment STATE_INSTANTIATED
+#define MASK_EnterInitializationMode STATE_INSTANTIATED
+#define MASK_ExitInitializationMode STATE_INITIALIZATION_MODE
+#define MASK_Terminate (STATE_STEP_COMPLETE | STATE_STEP_FAILED)
+#define MASK_Reset ANY_BUT_FATAL
+/* fmi2GetXXX: not in Instantiated (nothing is computed yet); in Error "for debugging" */
+#define MASK_Get                                                                           \
+    (STATE_INITIALIZATION_MODE | STATE_STEP_COMPLETE | STATE_STEP_FAILED |                 \
+     STATE_TERMINATED | STATE_ERROR)
+/* fmi2SetXXX: which variables may be set in which state is checked per variable */
+#define MASK_Set (STATE_INSTANTIATED | STATE_INITIALIZATION_MODE | STATE_STEP_COMPLETE)
+#define MASK_FMUstate ANY_BUT_FATAL
+#define MASK_DoStep STATE_STEP_COMPLETE
+#define MASK_Status (STATE_STEP_COMPLETE | STATE_STEP_FAILED | STATE_TERMINATED)
+
+static int allowed(Instance *inst, unsigned mask, const char *function) {
+    if (!(inst->m.state & mask)) {
+        model_error(&inst->m, "%s: illegal call sequence: not allowed in state %s", function,
+                    state_name(inst->m.state));
+        return 0;
+    }
+    return 1;
+}
+
+/* Common prologue: NULL instance -> fmi2Error (nothing to log to), wrong state -> fmi2Error. */
+#define ENTER(fn, mask)                                                                    \
+    Instance *inst = (Instance *)c;                                                        \
+    ModelInstance *m;                                                                      \
+    if (!inst) return fmi2Error;                                                           \
+    m = &inst->m;                                                                          \
+    if (!allowed(inst, (mask), (fn))) return fmi2Error;                                    \
+    (void)m
+
+static int null_arg(ModelInstance *m, const char *function, const char *arg, const void *p) {
+    if (!p) {
+        model_error(m, "%s: argument %s is NULL", function, arg);
+        return 1;
+    }
+    return 0;
+}
+
+/* ---- start values ------------------------------------------------------------------- */
+
+static void free_strings(ModelInstance *m) {
+#if N_STRING > 0
+    size_t k;
+    for (k = 0; k < N_STRING; k++) {
+        free(m->s[k]);
+        m->s[k] = NULL;
+    }
+#else
+    (void)m;
+#endif
+}
+
+static int set_start_values(ModelInstance *m) {
+    memcpy(m->r, model_real_start, sizeof m->r);
+    m->r[0] = 0.0; /* time */
+#if N_INTEGER > 0
+    memcpy(m->i, model_integer_start, sizeof m->i);
+#endif
+#if N_BOOLEAN > 0
+    memcpy(m->b, model_boolean_start, sizeof m->b);
+#endif
+#if N_STRING > 0
+    {
+        size_t k;
+        free_strings(m);
+        for (k = 0; k < N_STRING; k++) {
+            m->s[k] = dup_string(model_string_start[k]);
+            if (!m->s[k]) return 0;
+        }
+    }
+#endif
+    m->startTime = 0.0;
+    m->stopTime = 0.0;
+    m->stopTimeDefined = fmi2False;
+    m->lastSuccessfulTime = 0.0;
+    return 1;
+}
+
+static void release_model_data(ModelInstance *m) {
+    model_free(m);
+    m->modelData = NULL; /* model_free need not reset it */
+}
+
+/* ---- common functions (FMI 2.0.4, section 2.1) -------------------------------------- */
+
+const char *fmi2GetTypesPlatform(void) { return fmi2TypesPlatform; }
+
+const char *fmi2GetVersion(void) { return fmi2Version; }
+
+fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean loggingOn, size_t nCategories,
+                               const fmi2String categories[]) {
+    size_t k, j;
+    unsigned mask;
+    ENTER("fmi2SetDebugLogging", MASK_SetDebugLogging);
+
+    /* nCategories == 0: loggingOn applies to all categories; otherwise only to the ones
+       listed, which must be declared in <LogCategories> (FMI 2.0.4, 2.1.5) */
+    if (nCategories == 0) {
+        mask = loggingOn ? LOG_CATEGORIES_ALL : 0u;
+    } else {
+        if (null_arg(m, "fmi2SetDebugLogging", "categories[]", categories)) return fmi2Error;
+        mask = inst->logMask;
+        for (k = 0; k < nCategories; k++) {
+            unsigned bit = 0;
+            for (j = 0; j < N_LOG_CATEGORIES; j++) {
+                if (categories[k] && strcmp(categories[k], log_categories[j].name) == 0) {
+                    bit = log_categories[j].bit;
+                }
+            }
+            if (!bit) {
+                model_error(m, "fmi2SetDebugLogging: unknown log category \"%s\" (declared: "
+                               "logStatusError, logStatusWarning, logEvents, logAll)",
+                            categories[k] ? categories[k] : "(null)");
+                return fmi2Error;
+            }
+            mask = loggingOn ? (mask | bit) : (mask & ~bit);
+        }
+    }
+    inst->logMask = mask;
+    m->loggingOn = mask ? fmi2True : fmi2False;
+    return fmi2OK;
+}
+
+fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2String fmuGUID,
+                              fmi2String fmuResourceLocation,
+                              const fmi2CallbackFunctions *functions, fmi2Boolean visible,
+                              fmi2Boolean loggingOn) {
+    Instance *inst;
+    ModelInstance *m;
+    (void)visible;
+
+    if (!functions) return NULL; /* nobody to tell */
+    if (!instanceName || !*instanceName) {
+        log_early(instanceName, functions, "fmi2Instantiate: instanceName must be non-empty");
+        return NULL;
+    }
+    if (fmuType != fmi2CoSimulation) {
+        log_early(instanceName, functions,
+                  "fmi2Instantiate: %s supports Co-Simulation only (fmuType = %d)",
+                  MODEL_NAME, (int)fmuType);
+        return NULL;
+    }
+    if (!fmuGUID || strcmp(fmuGUID, MODEL_GUID) != 0) {
+        log_early(instanceName, functions,
+                  "fmi2Instantiate: GUID \"%s\" does not match this binary's \"%s\" "
+                  "(modelDescription.xml and binary from different builds?)",
+                  fmuGUID ? fmuGUID : "(null)", MODEL_GUID);
+        return NULL;
+    }
+
+    inst = (Instance *)calloc(1, sizeof *inst);
+    if (!inst) {
+        log_early(instanceName, functions, "fmi2Instantiate: out of memory");
+        return NULL;
+    }
+    m = &inst->m;
+    memcpy(&inst->callbacks, functions, sizeof inst->callbacks);
+    m->functions = &inst->callbacks;
+    m->instanceName = dup_string(instanceName);
+    m->resourceLocation = fmuResourceLocation ? dup_string(fmuResourceLocation) : NULL;
+    inst->logMask = loggingOn ? LOG_CATEGORIES_ALL : 0u;
+    m->loggingOn = loggingOn ? fmi2True : fmi2False;
+    m->modelData = NULL;
+    m->state = STATE_INSTANTIATED;
+    if (!m->instanceName || (fmuResourceLocation && !m->resourceLocation) ||
+        !set_start_values(m)) {
+        log_early(instanceName, functions, "fmi2Instantiate: out of memory");
+        free_strings(m);
+        free(m->instanceName);
+        free(m->resourceLocation);
+        free(inst);
+        return NULL;
+    }
+    return (fmi2Component)inst;
+}
+
+void fmi2FreeInstance(fmi2Component c) {
+    Instance *inst = (Instance *)c;
+    if (!inst) return;
+    release_model_data(&inst->m);
+    free_strings(&inst->m);
+    free(inst->m.instanceName);
+    free(inst->m.resourceLocation);
+    free(inst);
+}
+
+fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean toleranceDefined, fmi2Real tolerance,
+                               fmi2Real startTime, fmi2Boolean stopTimeDefined,
+                               fmi2Real stopTime) {
+    ENTER("fmi2SetupExperiment", MASK_SetupExperiment);
+    (void)toleranceDefined; /* fixed-step RK4: the step is the parameter, not a tolerance */
+    (void)tolerance;
+
+    if (!isfinite(startTime)) {
+        model_error(m, "fmi2SetupExperiment: startTime is not finite");
+        return fmi2Error;
+    }
+    if (stopTimeDefined && !(stopTime >= startTime)) {
+        model_error(m, "fmi2SetupExperiment: stopTime %.17g is before startTime %.17g",
+                    stopTime, startTime);
+        return fmi2Error;
+    }
+    m->startTime = startTime;
+    m->stopTimeDefined = stopTimeDefined ? fmi2True : fmi2False;
+    m->stopTime = stopTimeDefined ? stopTime : 0.0;
+    m->r[0] = startTime;
+    m->lastSuccessfulTime = startTime;
+    return fmi2OK;
+}
+
+fmi2Status fmi2EnterInitializationMode(fmi2Component c) {
+    ENTER("fmi2EnterInitializationMode", MASK_EnterInitializationMode);
+    m->state = STATE_INITIALIZATION_MODE;
+    return fmi2OK;
+}
+
+/* Outputs (states included) must be finite after every step; returns 1 if they are. */
+static int outputs_finite(ModelInstance *m, const char *function) {
+    size_t k;
+    for (k = 0; k < N_REAL; k++) {
+        if (model_real_info[k].causality == CAUSALITY_OUTPUT && !isfinite(m->r[k])) {
+            model_error(m, "%s: output %s is not finite (%g) at t = %.17g", function,
+                        model_real_info[k].name, m->r[k], m->r[0]);
+            return 0;
+        }
+    }
+    return 1;
+}
+
+fmi2Status fmi2ExitInitializationMode(fmi2Component c) {
+    ENTER("fmi2ExitInitializationMode", MASK_ExitInitializationMode);
+
+    /* Every failure here leaves the instance in InitializationMode without model data:
+       the model has logged which parameter is wrong, and the importer may correct it and
+       call fmi2ExitInitializationMode again, or reset / free the instance. */
+    if (model_check_parameters(m) != 0) {
+        model_error(m, "fmi2ExitInitializationMode: invalid parameter value(s), see above");
+        return fmi2Error;
+    }
+#if N_STATES > 0
+    if (!(m->r[VR_INTEGRATOR_STEP] > 0.0) || !isfinite(m->r[VR_INTEGRATOR_STEP])) {
+        model_error(m, "fmi2ExitInitializationMode: parameter %s = %g must be > 0 and finite",
+                    model_real_info[VR_INTEGRATOR_STEP].name, m->r[VR_INTEGRATOR_STEP]);
+        return fmi2Error;
+    }
+#endif
+    if (model_initialize(m) != 0) {
+        release_model_data(m);
+        model_error(m, "fmi2ExitInitializationMode: model initialisation failed");
+        return fmi2Error;
+    }
+    if (model_outputs(m) != 0) {
+        release_model_data(m);
+        model_error(m, "fmi2ExitInitializationMode: computing the initial outputs failed");
+        return fmi2Error;
+    }
+    if (!outputs_finite(m, "fmi2ExitInitializationMode")) {
+        release_model_data(m);
+        return fmi2Error;
+    }
+    m->lastSuccessfulTime = m->r[0];
+    m->state = STATE_STEP_COMPLETE;
+    return fmi2OK;
+}
+
+fmi2Status fmi2Terminate(fmi2Component c) {
+    ENTER("fmi2Terminate", MASK_Terminate);
+    m->state = STATE_TERMINATED;
+    return fmi2OK;
+}
+
+fmi2Status fmi2Reset(fmi2Component c) {
+    ENTER("fmi2Reset", MASK_Reset);
+    /* back to the state right after fmi2Instantiate (FMI 2.0.4, 2.1.6); the debug logging
+       settings are kept */
+    release_model_data(m);
+    if (!set_start_values(m)) {
+        model_error(m, "fmi2Reset: out of memory");
+        m->state = STATE_ERROR;
+        return fmi2Error;
+    }
+    m->state = STATE_INSTANTIATED;
+    return fmi2OK;
+}
+
+/* ---- getting and setting variables (FMI 2.0.4, 2.1.7) ------------------------------- */
+
+static int vr_in_range(ModelInstance *m, const char *function, fmi2ValueReference vr, size_t n) {
+    if ((size_t)vr >= n) {
+        model_error(m, "%s: value reference %u is out of range (this FMU has %u)", function,
+                    (unsigned)vr, (unsigned)n);
+        return 0;
+    }
+    return 1;
+}
+
+#if N_STATES > 0
+static int is_state_vr(fmi2ValueReference vr) {
+    size_t k;
+    for (k = 0; k < N_STATES; k++) {
+        if (model_state_vrs[k] == vr) return 1;
+    }
+    return 0;
+}
+#endif
+
+/* Whether a variable may be set in the current state. Before the end of initialisation
+   (Instantiated, InitializationMode): variables with initial = exact/approx or inputs,
+   i.e. parameters (fixed/tunable), inputs and states (outputs with initial = exact).
+   In StepComplete: inputs and tunable parameters only (FMI 2.0.4, 4.2.4, footnotes of the
+   state table). Never: time (independent), constants, calculated parameters, locals and
+   outputs computed by the model. Logs and returns 0 if not allowed. */
+static int settable(ModelInstance *m, const char *function, const VariableInfo *info,
+                    int isState) {
+    const char *why = NULL;
+    int ok;
+
+    if (info->variability == VARIABILITY_CONSTANT) {
+        why = "it is a constant";
+    } else if (m->state == STATE_STEP_COMPLETE) {
+        ok = info->causality == CAUSALITY_INPUT ||
+             (info->causality == CAUSALITY_PARAMETER &&
+              info->variability == VARIABILITY_TUNABLE);
+        if (!ok) why = "after initialisation only inputs and tunable parameters may be set";
+    } else {
+        ok = info->causality == CAUSALITY_PARAMETER || info->causality == CAUSALITY_INPUT ||
+             (info->causality == CAUSALITY_OUTPUT && isState);
+        if (!ok) why = "it is computed by the FMU";
+    }
+    if (why) {
+        model_error(m, "%s: variable %s (%s) cannot be set in state %s: %s", function,
+                    info->name, causality_name(info->causality), state_name(m->state), why);
+        return 0;
+    }
+    return 1;
+}
+
+/* After initialisation a tunable parameter may change: re-check the parameters so a value
+   outside [min, max] is refused as it would have been at initialisation. */
+static int tunable_parameter(const VariableInfo *info) {
+    return info->causality == CAUSALITY_PARAMETER && info->variability == VARIABILITY_TUNABLE;
+}
+
+/* Outputs with direct feedthrough must reflect inputs set after the last step (FMI 2.0.4,
+   4.2.1: fmi2GetXXX returns values computed with the actual inputs), so a set marks the
+   outputs stale and the next get recomputes them. */
+static void mark_outputs_stale(ModelInstance *m) {
+    if (m->state == STATE_STEP_COMPLETE) ((Instance *)m)->outputsStale = 1;
+}
+
+static int refresh_outputs(ModelInstance *m, const char *function) {
+    Instance *inst = (Instance *)m;
+    if (!inst->outputsStale || m->state != STATE_STEP_COMPLETE) return 1;
+    inst->outputsStale = 0;
+    if (model_outputs(m) != 0) {
+        model_error(m, "%s: computing the outputs for the new inputs failed", function);
+        return 0;
+    }
+    return 1;
+}
+
+fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
+                       fmi2Real value[]) {
+    size_t k;
+    ENTER("fmi2GetReal", MASK_Get);
+    if (nvr == 0) return fmi2OK;
+    if (!refresh_outputs(m, "fmi2GetReal")) return fmi2Error;
+    if (null_arg(m, "fmi2GetReal", "vr[]", vr) || null_arg(m, "fmi2GetReal", "value[]", value))
+        return fmi2Error;
+    for (k = 0; k < nvr; k++) {
+        if (!vr_in_range(m, "fmi2GetReal", vr[k], N_REAL)) return fmi2Error;
+        value[k] = m->r[vr[k]];
+    }
+    return fmi2OK;
+}
+
+fmi2Status fmi2GetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
+                          fmi2Integer value[]) {
+    size_t k;
+    ENTER("fmi2GetInteger", MASK_Get);
+    if (nvr == 0) return fmi2OK;
+    if (!refresh_outputs(m, "fmi2GetInteger")) return fmi2Error;
+    if (null_arg(m, "fmi2GetInteger", "vr[]", vr) ||
+        null_arg(m, "fmi2GetInteger", "value[]", value))
+        return fmi2Error;
+    for (k = 0; k < nvr; k++) {
+        if (!vr_in_range(m, "fmi2GetInteger", vr[k], N_INTEGER)) return fmi2Error;
+#if N_INTEGER > 0
+        value[k] = m->i[vr[k]];
+#endif
+    }
+    return fmi2OK;
+}
+
+fmi2Status fmi2GetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
+                          fmi2Boolean value[]) {
+    size_t k;
+    ENTER("fmi2GetBoolean", MASK_Get);
+    if (nvr == 0) return fmi2OK;
+    if (!refresh_outputs(m, "fmi2GetBoolean")) return fmi2Error;
+    if (null_arg(m, "fmi2GetBoolean", "vr[]", vr) ||
+        null_arg(m, "fmi2GetBoolean", "value[]", value))
+        return fmi2Error;
+    for (k = 0; k < nvr; k++) {
+        if (!vr_in_range(m, "fmi2GetBoolean", vr[k], N_BOOLEAN)) return fmi2Error;
+#if N_BOOLEAN > 0
+        value[k] = m->b[vr[k]];
+#endif
+    }
+    return fmi2OK;
+}
+
+/* The returned strings belong to the instance; they stay valid until the variable is set
+   again, the instance is reset or freed (FMI 2.0.4, 2.1.7). */
+fmi2Status fmi2GetString(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
+                         fmi2String value[]) {
+    size_t k;
+    ENTER("fmi2GetString", MASK_Get);
+    if (nvr == 0) return fmi2OK;
+    if (!refresh_outputs(m, "fmi2GetString")) return fmi2Error;
+    if (null_arg(m, "fmi2GetString", "vr[]", vr) ||
+        null_arg(m, "fmi2GetString", "value[]", value))
+        return fmi2Error;
+    for (k = 0; k < nvr; k++) {
+        if (!vr_in_range(m, "fmi2GetString", vr[k], N_STRING)) return fmi2Error;
+#if N_STRING > 0
+        value[k] = m->s[vr[k]];
+#endif
+    }
+    return fmi2OK;
+}
+
+/* The fmi2SetXXX functions check every (vr, value) first and change nothing unless all
+   are acceptable, so a refused call leaves the instance as it was. */
+
+fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
+                       const fmi2Real value[]) {
+    size_t k;
+    int tunableChanged = 0;
+    fmi2Real *old;
+    ENTER("fmi2SetReal", MASK_Set);
+    if (nvr == 0) return fmi2OK;
+    mark_outputs_stale(m);
+    if (null_arg(m, "fmi2SetReal", "vr[]", vr) || null_arg(m, "fmi2SetReal", "value[]", value))
+        return fmi2Error;
+    for (k = 0; k < nvr; k++) {
+        int isState = 0;
+        if (!vr_in_range(m, "fmi2SetReal", vr[k], N_REAL)) return fmi2Error;
+#if N_STATES > 0
+        isState = is_state_vr(vr[k]);
+#endif
+        if (!settable(m, "fmi2SetReal", &model_real_info[vr[k]], isState)) return fmi2Error;
+        if (!isfinite(value[k])) {
+            model_error(m, "fmi2SetReal: value %g for %s is not finite", value[k],
+                        model_real_info[vr[k]].name);
+            return fmi2Error;
+        }
+        if (m->state == STATE_STEP_COMPLETE && tunable_parameter(&model_real_info[vr[k]]))
+            tunableChanged = 1;
+    }
+    if (!tunableChanged) {
+        for (k = 0; k < nvr; k++) m->r[vr[k]] = value[k];
+        return fmi2OK;
+    }
+    /* a tunable parameter during the run: apply, check, undo on failure */
+    old = (fmi2Real *)malloc(nvr * sizeof *old);
+    if (!old) {
+        model_error(m, "fmi2SetReal: out of memory");
+        return fmi2Error;
+    }
+    for (k = 0; k < nvr; k++) {
+        old[k] = m->r[vr[k]];
+        m->r[vr[k]] = value[k];
+    }
+    if (model_check_parameters(m) != 0) {
+        for (k = nvr; k-- > 0;) m->r[vr[k]] = old[k]; /* reverse: repeated vrs */
+        free(old);
+        model_error(m, "fmi2SetReal: invalid tunable parameter value(s) refused, see above");
+        return fmi2Error;
+    }
+    free(old);
+    return fmi2OK;
+}
+
+fmi2Status fmi2SetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
+                          const fmi2Integer value[]) {
+    size_t k;
+    ENTER("fmi2SetInteger", MASK_Set);
+    if (nvr == 0) return fmi2OK;
+    mark_outputs_stale(m);
+    if (null_arg(m, "fmi2SetInteger", "vr[]", vr) ||
+        null_arg(m, "fmi2SetInteger", "value[]", value))
+        return fmi2Error;
+    for (k = 0; k < nvr; k++) {
+        if (!vr_in_range(m, "fmi2SetInteger", vr[k], N_INTEGER)) return fmi2Error;
+#if N_INTEGER > 0
+        if (!settable(m, "fmi2SetInteger", &model_integer_info[vr[k]], 0)) return fmi2Error;
+#endif
+    }
+#if N_INTEGER > 0
+    for (k = 0; k < nvr; k++) m->i[vr[k]] = value[k];
+#endif
+    return fmi2OK;
+}
+
+fmi2Status fmi2SetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
+                          const fmi2Boolean value[]) {
+    size_t k;
+    ENTER("fmi2SetBoolean", MASK_Set);
+    if (nvr == 0) return fmi2OK;
+    mark_outputs_stale(m);
+    if (null_arg(m, "fmi2SetBoolean", "vr[]", vr) ||
+        null_arg(m, "fmi2SetBoolean", "value[]", value))
+        return fmi2Error;
+    for (k = 0; k < nvr; k++) {
+        if (!vr_in_range(m, "fmi2SetBoolean", vr[k], N_BOOLEAN)) return fmi2Error;
+#if N_BOOLEAN > 0
+        if (!settable(m, "fmi2SetBoolean", &model_boolean_info[vr[k]], 0)) return fmi2Error;
+#endif
+    }
+#if N_BOOLEAN > 0
+    for (k = 0; k < nvr; k++) m->b[vr[k]] = value[k] ? fmi2True : fmi2False;
+#endif
+    return fmi2OK;
+}
+
+fmi2Status fmi2SetString(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
+                         const fmi2String value[]) {
+    size_t k;
+    ENTER("fmi2SetString", MASK_Set);
+    if (nvr == 0) return fmi2OK;
+    mark_outputs_stale(m);
+    if (null_arg(m, "fmi2SetString", "vr[]", vr) ||
+        null_arg(m, "fmi2SetString", "value[]", value))
+        return fmi2Error;
+    for (k = 0; k < nvr; k++) {
+        if (!vr_in_range(m, "fmi2SetString", vr[k], N_STRING)) return fmi2Error;
+#if N_STRING > 0
+        if (!settable(m, "fmi2SetString", &model_string_info[vr[k]], 0)) return fmi2Error;
+        if (!value[k]) {
+            model_error(m, "fmi2SetString: value for %s is NULL", model_string_info[vr[k]].name);
+            return fmi2Error;
+        }
+#endif
+    }
+#if N_STRING > 0
+    {
+        /* copy all first, so running out of memory changes nothing */
+        char **copies = (char **)calloc(nvr, sizeof *copies);
+        int failed = copies == NULL;
+        for (k = 0; k < nvr && !failed; k++) {
+            copies[k] = dup_string(value[k]);
+            failed = copies[k] == NULL;
+        }
+        if (failed) {
+            if (copies) {
+                for (k = 0; k < nvr; k++) free(copies[k]);
+                free(copies);
+            }
+            model_error(m, "fmi2SetString: out of memory");
+            return fmi2Error;
+        }
+        for (k = 0; k < nvr; k++) {
+            free(m->s[vr[k]]);
+            m->s[vr[k]] = copies[k];
+        }
+        free(copies);
+    }
+#endif
+    return fmi2OK;
+}
+
+/* ---- FMU state (FMI 2.0.4, 2.1.8) --------------------------------------------------- */
+
+static void snapshot_free_strings(Snapshot *st) {
+#if N_STRING > 0
+    size_t k;
+    for (k = 0; k < N_STRING; k++) {
+        free(st->s[k]);
+        st->s[k] = NULL;
+    }
+#else
+    (void)st;
+#endif
+}
+
+static Snapshot *as_snapshot(ModelInstance *m, const char *function, fmi2FMUstate p) {
+    Snapshot *st = (Snapshot *)p;
+    if (!st) {
+        model_error(m, "%s: FMUstate is NULL", function);
+        return NULL;
+    }
+    if (st->magic != SNAPSHOT_MAGIC) {
+        model_error(m, "%s: FMUstate was not created by this FMU (or was freed)", function);
+        return NULL;
+    }
+    return st;
+}
+
+fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *FMUstate) {
+    Snapshot *st;
+    ENTER("fmi2GetFMUstate", MASK_FMUstate);
+    if (null_arg(m, "fmi2GetFMUstate", "FMUstate", FMUstate)) return fmi2Error;
+
+    /* *FMUstate != NULL: a state returned before and not freed, to be overwritten */
+    if (*FMUstate) {
+        st = as_snapshot(m, "fmi2GetFMUstate", *FMUstate);
+        if (!st) return fmi2Error;
+        snapshot_free_strings(st);
+    } else {
+        st = (Snapshot *)calloc(1, sizeof *st);
+        if (!st) {
+            model_error(m, "fmi2GetFMUstate: out of memory");
+            return fmi2Error;
+        }
+        st->magic = SNAPSHOT_MAGIC;
+    }
+    st->state = m->state;
+    st->startTime = m->startTime;
+    st->stopTime = m->stopTime;
+    st->stopTimeDefined = m->stopTimeDefined;
+    st->lastSuccessfulTime = m->lastSuccessfulTime;
+    memcpy(st->r, m->r, sizeof st->r);
+#if N_INTEGER > 0
+    memcpy(st->i, m->i, sizeof st->i);
+#endif
+#if N_BOOLEAN > 0
+    memcpy(st->b, m->b, sizeof st->b);
+#endif
+#if N_STRING > 0
+    {
+        size_t k;
+        for (k = 0; k < N_STRING; k++) {
+            st->s[k] = dup_string(m->s[k]);
+            if (!st->s[k]) {
+                snapshot_free_strings(st);
+                st->magic = 0;
+                free(st);
+                *FMUstate = NULL;
+                model_error(m, "fmi2GetFMUstate: out of memory");
+                return fmi2Error;
+            }
+        }
+    }
+#endif
+    *FMUstate = (fmi2FMUstate)st;
+    return fmi2OK;
+}
+
+fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate FMUstate) {
+    const Snapshot *st;
+    ENTER("fmi2SetFMUstate", MASK_FMUstate);
+    st = as_snapshot(m, "fmi2SetFMUstate", FMUstate);
+    if (!st) return fmi2Error;
+
+#if N_STRING > 0
+    {
+        /* copy the strings first, so running out of memory changes nothing */
+        char *copies[N_STRING];
+        size_t k;
+        int failed = 0;
+        for (k = 0; k < N_STRING; k++) {
+            copies[k] = failed ? NULL : dup_string(st->s[k]);
+            if (!copies[k]) failed = 1;
+        }
+        if (failed) {
+            for (k = 0; k < N_STRING; k++) free(copies[k]);
+            model_error(m, "fmi2SetFMUstate: out of memory");
+            return fmi2Error;
+        }
+        free_strings(m);
+        for (k = 0; k < N_STRING; k++) m->s[k] = copies[k];
+    }
+#endif
+    memcpy(m->r, st->r, sizeof m->r);
+#if N_INTEGER > 0
+    memcpy(m->i, st->i, sizeof m->i);
+#endif
+#if N_BOOLEAN > 0
+    memcpy(m->b, st->b, sizeof m->b);
+#endif
+    m->startTime = st->startTime;
+    m->stopTime = st->stopTime;
+    m->stopTimeDefined = st->stopTimeDefined;
+    m->lastSuccessfulTime = st->lastSuccessfulTime;
+    m->state = st->state;
+
+    /* modelData is not part of the state: drop it, and rebuild it from the restored
+       parameters if the restored state is past initialisation (before that,
+       fmi2ExitInitializationMode builds it with model_initialize). */
+    release_model_data(m);
+    if (m->state & (STATE_STEP_COMPLETE | STATE_STEP_FAILED | STATE_TERMINATED)) {
+        if (model_state_restored(m) != 0) {
+            release_model_data(m);
+            model_error(m, "fmi2SetFMUstate: rebuilding the model data failed");
+            m->state = STATE_ERROR;
+            return fmi2Error;
+        }
+    }
+    mark_outputs_stale(m); /* the state may have been saved with inputs set after a step */
+    return fmi2OK;
+}
+
+fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate *FMUstate) {
+    Snapshot *st;
+    ENTER("fmi2FreeFMUstate", MASK_FMUstate);
+    if (null_arg(m, "fmi2FreeFMUstate", "FMUstate", FMUstate)) return fmi2Error;
+    if (!*FMUstate) return fmi2OK; /* like free(NULL) */
+    st = as_snapshot(m, "fmi2FreeFMUstate", *FMUstate);
+    if (!st) return fmi2Error;
+    snapshot_free_strings(st);
+    st->magic = 0; /* a second free is caught (as long as the memory is not reused) */
+    free(st);
+    *FMUstate = NULL;
+    return fmi2OK;
+}
+
+/* Serialized layout, native byte order (a state is restored on the platform that saved it;
+   the version word read back in the wrong byte order fails the header check):
+     "RFMU"  uint32 format version  uint32 N_REAL N_INTEGER N_BOOLEAN N_STRING
+     uint32 strlen(MODEL_GUID)  GUID bytes
+     int32 state  int32 stopTimeDefined  double startTime stopTime lastSuccessfulTime
+     double r[N_REAL]  int32 i[N_INTEGER]  int32 b[N_BOOLEAN]
+     per string: uint32 length, bytes (no terminator) */
+#define SER_MAGIC "RFMU"
+#define SER_VERSION 1u
+
+typedef struct {
+    unsigned char *w;       /* writing: destination (NULL: only count) */
+    const unsigned char *r; /* reading: source */
+    size_t pos, size;       /* bytes done, bytes available when reading */
+    int ok;
+} Cursor;
+
+static void put(Cursor *cu, const void *p, size_t n) {
+    if (cu->w) memcpy(cu->w + cu->pos, p, n);
+    cu->pos += n;
+}
+
+static void get(Cursor *cu, void *p, size_t n) {
+    if (!cu->ok || n > cu->size - cu->pos) {
+        cu->ok = 0;
+        memset(p, 0, n);
+        return;
+    }
+    memcpy(p, cu->r + cu->pos, n);
+    cu->pos += n;
+}
+
+static void put_u32(Cursor *cu, uint32_t v) { put(cu, &v, sizeof v); }
+static void put_i32(Cursor *cu, int32_t v) { put(cu, &v, sizeof v); }
+static uint32_t get_u32(Cursor *cu) {
+    uint32_t v;
+    get(cu, &v, sizeof v);
+    return v;
+}
+static int32_t get_i32(Cursor *cu) {
+    int32_t v;
+    get(cu, &v, sizeof v);
+    return v;
+}
+
+static void write_header(Cursor *cu) {
+    put(cu, SER_MAGIC, 4);
+    put_u32(cu, SER_VERSION);
+    put_u32(cu, (uint32_t)N_REAL);
+    put_u32(cu, (uint32_t)N_INTEGER);
+    put_u32(cu, (uint32_t)N_BOOLEAN);
+    put_u32(cu, (uint32_t)N_STRING);
+    put_u32(cu, (uint32_t)strlen(MODEL_GUID));
+    put(cu, MODEL_GUID, strlen(MODEL_GUID));
+}
+
+/* With cu->w == NULL this only counts the bytes. */
+static void write_snapshot(Cursor *cu, const Snapshot *st) {
+    size_t k;
+    write_header(cu);
+    put_i32(cu, (int32_t)st->state);
+    put_i32(cu, (int32_t)st->stopTimeDefined);
+    put(cu, &st->startTime, sizeof(double));
+    put(cu, &st->stopTime, sizeof(double));
+    put(cu, &st->lastSuccessfulTime, sizeof(double));
+    put(cu, st->r, sizeof st->r);
+    (void)k;
+#if N_INTEGER > 0
+    for (k = 0; k < N_INTEGER; k++) put_i32(cu, (int32_t)st->i[k]);
+#endif
+#if N_BOOLEAN > 0
+    for (k = 0; k < N_BOOLEAN; k++) put_i32(cu, (int32_t)st->b[k]);
+#endif
+#if N_STRING > 0
+    for (k = 0; k < N_STRING; k++) {
+        size_t n = st->s[k] ? strlen(st->s[k]) : 0;
+        put_u32(cu, (uint32_t)n);
+        if (n) put(cu, st->s[k], n);
+    }
+#endif
+}
+
+fmi2Status fmi2SerializedFMUstateSize(fmi2Component c, fmi2FMUstate FMUstate, size_t *size) {
+    const Snapshot *st;
+    Cursor cu = {NULL, NULL, 0, 0, 1};
+    ENTER("fmi2SerializedFMUstateSize", MASK_FMUstate);
+    st = as_snapshot(m, "fmi2SerializedFMUstateSize", FMUstate);
+    if (!st || null_arg(m, "fmi2SerializedFMUstateSize", "size", size)) return fmi2Error;
+    write_snapshot(&cu, st);
+    *size = cu.pos;
+    return fmi2OK;
+}
+
+fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate FMUstate,
+                                 fmi2Byte serializedState[], size_t size) {
+    const Snapshot *st;
+    Cursor cu = {NULL, NULL, 0, 0, 1};
+    ENTER("fmi2SerializeFMUstate", MASK_FMUstate);
+    st = as_snapshot(m, "fmi2SerializeFMUstate", FMUstate);
+    if (!st || null_arg(m, "fmi2SerializeFMUstate", "serializedState", serializedState))
+        return fmi2Error;
+    write_snapshot(&cu, st); /* count */
+    if (size < cu.pos) {
+        model_error(m, "fmi2SerializeFMUstate: buffer of %lu bytes is too small (%lu needed, "
+                       "see fmi2SerializedFMUstateSize)",
+                    (unsigned long)size, (unsigned long)cu.pos);
+        return fmi2Error;
+    }
+    cu.w = (unsigned char *)serializedState;
+    cu.pos = 0;
+    write_snapshot(&cu, st);
+    return fmi2OK;
+}
+
+static int deser_fail(ModelInstance *m, const char *what) {
+    model_error(m, "fmi2DeSerializeFMUstate: %s", what);
+    return 0;
+}
+
+/* Reads a serialized state into st (strings malloc'ed). Returns 1 on success. */
+static int read_snapshot(ModelInstance *m, Cursor *cu, Snapshot *st) {
+    char magic[4];
+    uint32_t version, nr, ni, nb, ns, nguid;
+    char guid[sizeof MODEL_GUID];
+    size_t k;
+    int32_t state;
+
+    get(cu, magic, 4);
+    if (!cu->ok || memcmp(magic, SER_MAGIC, 4) != 0)
+        return deser_fail(m, "not a serialized railfmu FMU state (bad magic)");
+    version = get_u32(cu);
+    if (!cu->ok || version != SER_VERSION)
+        return deser_fail(m, "unsupported format version or byte order");
+    nr = get_u32(cu);
+    ni = get_u32(cu);
+    nb = get_u32(cu);
+    ns = get_u32(cu);
+    if (!cu->ok || nr != N_REAL || ni != N_INTEGER || nb != N_BOOLEAN || ns != N_STRING)
+        return deser_fail(m, "the state has other variable counts than this FMU");
+    nguid = get_u32(cu);
+    if (!cu->ok || nguid != strlen(MODEL_GUID))
+        return deser_fail(m, "the state was saved by another FMU (GUID differs)");
+    get(cu, guid, nguid);
+    if (!cu->ok || memcmp(guid, MODEL_GUID, nguid) != 0)
+        return deser_fail(m, "the state was saved by another FMU (GUID differs)");
+
+    state = get_i32(cu);
+    if (!cu->ok || !is_valid_state(state)) return deser_fail(m, "invalid instance state");
+    st->state = (ModelState)state;
+    st->stopTimeDefined = get_i32(cu) ? fmi2True : fmi2False;
+    get(cu, &st->startTime, sizeof(double));
+    get(cu, &st->stopTime, sizeof(double));
+    get(cu, &st->lastSuccessfulTime, sizeof(double));
+    get(cu, st->r, sizeof st->r);
+    (void)k;
+#if N_INTEGER > 0
+    for (k = 0; k < N_INTEGER; k++) st->i[k] = (fmi2Integer)get_i32(cu);
+#endif
+#if N_BOOLEAN > 0
+    for (k = 0; k < N_BOOLEAN; k++) st->b[k] = get_i32(cu) ? fmi2True : fmi2False;
+#endif
+#if N_STRING > 0
+    for (k = 0; k < N_STRING; k++) {
+        uint32_t n = get_u32(cu);
+        if (!cu->ok || n > cu->size - cu->pos) return deser_fail(m, "truncated data");
+        st->s[k] = (char *)malloc((size_t)n + 1);
+        if (!st->s[k]) return deser_fail(m, "out of memory");
+        get(cu, st->s[k], n);
+        st->s[k][n] = '\0';
+    }
+#endif
+    if (!cu->ok) return deser_fail(m, "truncated data");
+    if (cu->pos != cu->size) return deser_fail(m, "trailing bytes after the state");
+    return 1;
+}
+
+fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte serializedState[],
+                                   size_t size, fmi2FMUstate *FMUstate) {
+    Snapshot *st;
+    Cursor cu = {NULL, NULL, 0, 0, 1};
+    ENTER("fmi2DeSerializeFMUstate", MASK_FMUstate);
+    if (null_arg(m, "fmi2DeSerializeFMUstate", "serializedState", serializedState) ||
+        null_arg(m, "fmi2DeSerializeFMUstate", "FMUstate", FMUstate))
+        return fmi2Error;
+
+    /* always a new state object (FMI 2.0.4, 2.1.8: "constructs a copy of the FMU state");
+       *FMUstate on entry is not looked at */
+    st = (Snapshot *)calloc(1, sizeof *st);
+    if (!st) {
+        model_error(m, "fmi2DeSerializeFMUstate: out of memory");
+        return fmi2Error;
+    }
+    cu.r = (const unsigned char *)serializedState;
+    cu.size = size;
+    if (!read_snapshot(m, &cu, st)) {
+        snapshot_free_strings(st);
+        free(st);
+        return fmi2Error;
+    }
+    st->magic = SNAPSHOT_MAGIC;
+    *FMUstate = (fmi2FMUstate)st;
+    return fmi2OK;
+}
+
+/* ---- partial derivatives, input/output derivatives: not provided -------------------- */
+
+fmi2Status fmi2GetDirectionalDerivative(fmi2Component c, const fmi2ValueReference vUnknown_ref[],
+                                        size_t nUnknown, const fmi2ValueReference vKnown_ref[],
+                                        size_t nKnown, const fmi2Real dvKnown[],
+                                        fmi2Real dvUnknown[]) {
+    Instance *inst = (Instance *)c;
+    (void)vUnknown_ref, (void)nUnknown, (void)vKnown_ref, (void)nKnown, (void)dvKnown;
+    (void)dvUnknown;
+    if (inst)
+        model_error(&inst->m, "fmi2GetDirectionalDerivative: not provided by this FMU "
+                              "(providesDirectionalDerivative = false)");
+    return fmi2Error;
+}
+
+fmi2Status fmi2SetRealInputDerivatives(fmi2Component c, const fmi2ValueReference vr[],
+                                       size_t nvr, const fmi2Integer order[],
+                                       const fmi2Real value[]) {
+    Instance *inst = (Instance *)c;
+    (void)vr, (void)nvr, (void)order, (void)value;
+    if (inst)
+        model_error(&inst->m, "fmi2SetRealInputDerivatives: not supported by this FMU "
+                              "(canInterpolateInputs = false)");
+    return fmi2Error;
+}
+
+fmi2Status fmi2GetRealOutputDerivatives(fmi2Component c, const fmi2ValueReference vr[],
+                                        size_t nvr, const fmi2Integer order[],
+                                        fmi2Real value[]) {
+    Instance *inst = (Instance *)c;
+    (void)vr, (void)nvr, (void)order, (void)value;
+    if (inst)
+        model_error(&inst->m, "fmi2GetRealOutputDerivatives: not supported by this FMU "
+                              "(MaxOutputDerivativeOrder = 0)");
+    return fmi2Error;
+}
+
+/* ---- stepping (FMI 2.0.4, 4.2.2) ---------------------------------------------------- */
+
+#if N_STATES > 0
+/* One classic RK4 step of size dt from time t: x <- x + dt/6 (k1 + 2 k2 + 2 k3 + k4). */
+static void rk4_step(ModelInstance *m, double t, double dt, double *x) {
+    double k1[N_STATES], k2[N_STATES], k3[N_STATES], k4[N_STATES], xt[N_STATES];
+    size_t j;
+
+    model_derivatives(m, t, x, k1);
+    for (j = 0; j < N_STATES; j++) xt[j] = x[j] + 0.5 * dt * k1[j];
+    model_derivatives(m, t + 0.5 * dt, xt, k2);
+    for (j = 0; j < N_STATES; j++) xt[j] = x[j] + 0.5 * dt * k2[j];
+    model_derivatives(m, t + 0.5 * dt, xt, k3);
+    for (j = 0; j < N_STATES; j++) xt[j] = x[j] + dt * k3[j];
+    model_derivatives(m, t + dt, xt, k4);
+    for (j = 0; j < N_STATES; j++)
+        x[j] += dt / 6.0 * (k1[j] + 2.0 * k2[j] + 2.0 * k3[j] + k4[j]);
+}
+
+/* Integrates the states over [t0, t0 + h] in n equal sub-steps. Returns 1 on success. */
+static int integrate(ModelInstance *m, double t0, double h) {
+    const double hmax = m->r[VR_INTEGRATOR_STEP];
+    double x[N_STATES];
+    double q, dt;
+    unsigned long n, step;
+    size_t j;
+
+    /* n = ceil(h / hmax - 1e-9), at least 1 (the 1e-9 keeps h = k * hmax from becoming
+       k + 1 sub-steps through rounding); computed without libm */
+    q = h / hmax - 1e-9;
+    if (!(q < 1e9)) {
+        model_error(m, "fmi2DoStep: step %g needs more than 1e9 internal steps of %s = %g", h,
+                    model_real_info[VR_INTEGRATOR_STEP].name, hmax);
+        return 0;
+    }
+    n = q > 0 ? (unsigned long)q : 0;
+    if ((double)n < q) n++;
+    if (n < 1) n = 1;
+    dt = h / (double)n;
+
+    for (j = 0; j < N_STATES; j++) x[j] = m->r[model_state_vrs[j]];
+    for (step = 0; step < n; step++) {
+        const double t = t0 + (double)step * dt;
+        rk4_step(m, t, dt, x);
+        for (j = 0; j < N_STATES; j++) {
+            if (!isfinite(x[j])) {
+                model_error(m, "fmi2DoStep: state %s became %g in the internal step from "
+                               "t = %.17g to %.17g",
+                            model_real_info[model_state_vrs[j]].name, x[j], t, t + dt);
+                /* leave the non-finite value visible for debugging (fmi2GetReal is
+                   allowed in state Error) */
+                for (j = 0; j < N_STATES; j++) m->r[model_state_vrs[j]] = x[j];
+                return 0;
+            }
+        }
+    }
+    for (j = 0; j < N_STATES; j++) m->r[model_state_vrs[j]] = x[j];
+    return 1;
+}
+#endif
+
+fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint,
+                      fmi2Real communicationStepSize,
+                      fmi2Boolean noSetFMUStatePriorToCurrentPoint) {
+    const double t0 = currentCommunicationPoint, h = communicationStepSize;
+    ENTER("fmi2DoStep", MASK_DoStep);
+    (void)noSetFMUStatePriorToCurrentPoint; /* states are cheap to keep */
+
+    /* Argument errors change nothing: the instance stays in StepComplete. */
+    if (!isfinite(t0) || !time_close(t0, m->r[0])) {
+        model_error(m, "fmi2DoStep: currentCommunicationPoint %.17g differs from the FMU time "
+                       "%.17g (steps must follow each other)",
+                    t0, m->r[0]);
+        return fmi2Error;
+    }
+    if (!(h > 0.0) || !isfinite(h)) {
+        model_error(m, "fmi2DoStep: communicationStepSize %g must be > 0", h);
+        return fmi2Error;
+    }
+    if (m->stopTimeDefined &&
+        t0 + h > m->stopTime + TIME_EPS * max_d(1.0, abs_d(m->stopTime))) {
+        model_error(m, "fmi2DoStep: step to t = %.17g goes past stopTime %.17g", t0 + h,
+                    m->stopTime);
+        return fmi2Error;
+    }
+
+    /* r[0] stays t0 during the integration (model.h: inputs with first-order hold use
+       t - r[0]); a failure below leaves the instance in state Error. */
+#if N_STATES > 0
+    if (!integrate(m, t0, h)) {
+        m->state = STATE_ERROR;
+        return fmi2Error;
+    }
+#endif
+    m->r[0] = t0 + h; /* not r[0] += h: no drift from the FMU's own time */
+    if (model_outputs(m) != 0) {
+        model_error(m, "fmi2DoStep: computing the outputs at t = %.17g failed", m->r[0]);
+        m->state = STATE_ERROR;
+        return fmi2Error;
+    }
+    if (!outputs_finite(m, "fmi2DoStep")) {
+        m->state = STATE_ERROR;
+        return fmi2Error;
+    }
+    ((Instance *)m)->outputsStale = 0;
+    m->lastSuccessfulTime = m->r[0];
+    return fmi2OK;
+}
+
+fmi2Status fmi2CancelStep(fmi2Component c) {
+    Instance *inst = (Instance *)c;
+    if (inst)
+        model_error(&inst->m, "fmi2CancelStep: this FMU does not step asynchronously "
+                              "(canRunAsynchronuously = false), there is nothing to cancel");
+    return fmi2Error;
+}
+
+/* ---- status (FMI 2.0.4, 4.2.3) ------------------------------------------------------ */
+
+/* A status kind a function does not deliver: fmi2Discard, as the standard says. */
+static fmi2Status unsupported_kind(ModelInstance *m, const char *function, fmi2StatusKind s) {
+    model_log(m, fmi2Discard, "logStatusWarning",
+              "%s: status kind %d is not provided by this function", function, (int)s);
+    return fmi2Discard;
+}
+
+fmi2Status fmi2GetStatus(fmi2Component c, const fmi2StatusKind s, fmi2Status *value) {
+    ENTER("fmi2GetStatus", MASK_Status);
+    if (null_arg(m, "fmi2GetStatus", "value", value)) return fmi2Error;
+    /* fmi2DoStepStatus only has a meaning after fmi2DoStep returned fmi2Pending, which this
+       FMU never does */
+    return unsupported_kind(m, "fmi2GetStatus", s);
+}
+
+fmi2Status fmi2GetRealStatus(fmi2Component c, const fmi2StatusKind s, fmi2Real *value) {
+    ENTER("fmi2GetRealStatus", MASK_Status);
+    if (null_arg(m, "fmi2GetRealStatus", "value", value)) return fmi2Error;
+    if (s == fmi2LastSuccessfulTime) {
+        *value = m->lastSuccessfulTime;
+        return fmi2OK;
+    }
+    return unsupported_kind(m, "fmi2GetRealStatus", s);
+}
+
+fmi2Status fmi2GetIntegerStatus(fmi2Component c, const fmi2StatusKind s, fmi2Integer *value) {
+    ENTER("fmi2GetIntegerStatus", MASK_Status);
+    if (null_arg(m, "fmi2GetIntegerStatus", "value", value)) return fmi2Error;
+    return unsupported_kind(m, "fmi2GetIntegerStatus", s); /* no integer status kinds */
+}
+
+fmi2Status fmi2GetBooleanStatus(fmi2Component c, const fmi2StatusKind s, fmi2Boolean *value) {
+    ENTER("fmi2GetBooleanStatus", MASK_Status);
+    if (null_arg(m, "fmi2GetBooleanStatus", "value", value)) return fmi2Error;
+    if (s == fmi2Terminated) {
+        *value = fmi2False; /* the slave never asks to end the simulation */
+        return fmi2OK;
+    }
+    return unsupported_kind(m, "fmi2GetBooleanStatus", s);
+}
+
+fmi2Status fmi2GetStringStatus(fmi2Component c, const fmi2StatusKind s, fmi2String *value) {
+    ENTER("fmi2GetStringStatus", MASK_Status);
+    if (null_arg(m, "fmi2GetStringStatus", "value", value)) return fmi2Error;
+    /* fmi2PendingStatus: only while fmi2DoStep is pending, which never happens */
+    return unsupported_kind(m, "fmi2GetStringStatus", s);
+}
