@@ -40,14 +40,16 @@ def test_sources_rebuild_on_their_own(fmu_dir, tmp_path, ident):
 @pytest.mark.parametrize("ident", MODELS)
 def test_simulates_with_fmpy(fmu_dir, ident):
     start = {"y": 1e-3} if ident == "WheelsetLateral" else {}
-    res = simulate_fmu(str(fmu_dir / f"{ident}.fmu"), stop_time=2.0, output_interval=1e-3,
+    res = simulate_fmu(str(fmu_dir / f"{ident}.fmu"), stop_time=6.0, output_interval=1e-3,
                        step_size=1e-3, start_values=start)
-    assert len(res) == 2001
+    assert len(res) == 6001
     for name in res.dtype.names:
         assert np.all(np.isfinite(res[name])), name
-    if ident == "WheelsetLateral":  # released from 1 mm on a perfect track, it centres itself
+    if ident == "WheelsetLateral":
+        # released from 1 mm on a perfect track it centres itself; the least damped mode
+        # (kinematic, sigma = -1.03 1/s) leaves e^(-1.03 * 6) = 0.2 % after 6 s
         assert abs(res["y"][0] - 1e-3) < 1e-12
-        assert abs(res["y"][-1]) < 0.05e-3
+        assert np.abs(res["y"][-500:]).max() < 0.01e-3
 
 
 def test_invalid_parameter_is_a_clear_error(fmu_dir):
