@@ -647,5 +647,8 @@ TRACK = Model(
     ],
     outputs=_outputs(),
     c_sources=["TrackIrregularity.c"],
+    # an example profile shipped in resources/: set profile_file = "isolated_alignment_defect.csv"
+    # (a synthetic 4 mm, 10 m raised-cosine alignment cusp at s = 50..60 m)
+    resources={"isolated_alignment_defect.csv": Path(__file__).parent / "data" / "isolated_alignment_defect.csv"},
     documentation=__doc__,
 )

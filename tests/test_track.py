@@ -7,6 +7,7 @@ import math
 import numpy as np
 import pytest
 from scipy.integrate import quad
+from fmpy import simulate_fmu
 from scipy.signal import periodogram, welch
 
 from models.track import (TRACK, ProfileTable, SplitMix64, TrackIrregularity, grid_size,
@@ -243,7 +244,6 @@ def test_fmu_equals_python(track_fmu, tmp_path, psd_level):
     * against the exact cosine sum: within the Hermite tabulation bound
       (:func:`tabulation_error_bound`, ~2e-8 m and 2e-6 m/m at the default grid_step; the
       measured error is ~1e-9 m and ~2e-6 m/s since the bound adds all lines in phase)."""
-    from fmpy import simulate_fmu
 
     params = {"seed": 7, "psd_level": psd_level, "harmonic_lateral_amplitude": 1e-3,
               "harmonic_vertical_amplitude": 5e-4, "harmonic_wavelength": 15.66,
@@ -272,7 +272,6 @@ def test_fmu_equals_python(track_fmu, tmp_path, psd_level):
 
 def test_fmu_fine_grid_equals_cosine_sum(track_fmu):
     """With grid_step = 0.0125 m (M = 2^19) the FMU is the exact cosine sum within ~1e-11 m."""
-    from fmpy import simulate_fmu
 
     params = {"seed": 21, "psd_level": 2, "grid_step": 0.0125}
     res = simulate_fmu(str(track_fmu), start_values=params, stop_time=2.0, output_interval=0.01)
@@ -287,7 +286,6 @@ def test_fmu_fine_grid_equals_cosine_sum(track_fmu):
 def _initialisation_error(fmu, params) -> str:
     """What the FMU logs when initialisation fails (through FMPy's own logger proxy, which
     formats the runtime's printf-style messages)."""
-    from fmpy import simulate_fmu
     from fmpy.fmi1 import FMICallException
 
     messages = []
@@ -323,3 +321,16 @@ def test_fmu_reports_bad_profile_table(track_fmu, tmp_path, name):
 ])
 def test_fmu_rejects_bad_parameters(track_fmu, params, msg):
     assert msg in _initialisation_error(track_fmu, params)
+
+
+def test_profile_from_the_fmu_resources(fmu_dir):
+    """The example profile shipped in resources/ is found by its relative name: the 4 mm cusp
+    peaks under wheelset 1 at s = 55 m (t = 2.75 s at 20 m/s) and under wheelset 3
+    (19 m behind) 0.95 s later."""
+    res = simulate_fmu(str(fmu_dir / "TrackIrregularity.fmu"), stop_time=5.0, step_size=1e-3,
+                       output_interval=1e-3,
+                       start_values={"psd_level": 0, "profile_file": "isolated_alignment_defect.csv"})
+    t = res["time"]
+    assert res["alignment_1"].max() == pytest.approx(4e-3, rel=1e-6)
+    assert t[np.argmax(res["alignment_1"])] == pytest.approx(2.75, abs=1e-3)
+    assert t[np.argmax(res["alignment_3"])] == pytest.approx(2.75 + 19.0 / 20.0, abs=1e-3)
