@@ -132,17 +132,36 @@ def _plot(exp, data, out: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    for fname, (title, signals) in exp.PLOTS.items():
-        fig, axes = plt.subplots(len(signals), 1, figsize=(9, 2.2 * len(signals)), sharex=True)
-        for ax, (sig, label) in zip(axes, signals):
-            ax.plot(data["time"], data[sig], lw=0.8)
-            ax.set_ylabel(label, fontsize=8)
+    for fname, (title, axes_spec) in exp.PLOTS.items():
+        fig, axes = plt.subplots(len(axes_spec), 1, figsize=(9, 2.4 * len(axes_spec)), sharex=True,
+                                 squeeze=False)
+        for ax, signals in zip(axes[:, 0], axes_spec):
+            for sig, label in signals:
+                ax.plot(data["time"], data[sig], lw=0.8, label=label)
+            if len(signals) > 1:
+                ax.legend(fontsize=8, loc="upper right")
+                ax.set_ylabel(f"[{_unit(sig)}]", fontsize=8)
+            else:
+                ax.set_ylabel(signals[0][1], fontsize=8)
             ax.grid(alpha=0.3)
-        axes[0].set_title(title)
-        axes[-1].set_xlabel("time [s]")
+        axes[0, 0].set_title(title)
+        axes[-1, 0].set_xlabel("time [s]")
         fig.tight_layout()
         fig.savefig(out / fname, dpi=110)
         plt.close(fig)
+
+
+def _unit(signal: str) -> str:
+    """Unit of 'component.variable' from the model definitions (for axis labels)."""
+    from models import all_models
+
+    var = signal.split(".", 1)[1]
+    for model in all_models():
+        try:
+            return model.variable(var).unit or "-"
+        except KeyError:
+            continue
+    return "?"
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -138,6 +138,8 @@ def validate(path: Path | str) -> list[str]:
     from fmpy.validation import validate_fmu
 
     path = Path(path)
+    if path.is_file() and not zipfile.is_zipfile(path):
+        return [f"{path.name} is not a ZIP archive"]
     problems = list(validate_fmu(str(path)))
     if path.is_file():
         with zipfile.ZipFile(path) as zf:

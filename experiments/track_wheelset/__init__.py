@@ -16,13 +16,15 @@ VARIANTS = {
     "harmonic": {"track": {"psd_level": 0, "harmonic_lateral_amplitude": 1e-3, "harmonic_wavelength": 20.0}},
 }
 DEFAULT_VARIANT = "psd"
-PLOTS = {  # file -> (title, [(signal, label)])
-    "track_input.png": ("Alignment under the leading wheelset", [("track.alignment_1", "alignment xi [m]"),
-                                                                 ("wheelset.y", "wheelset y [m]"),
-                                                                 ("wheelset.y_f", "frame y_f [m]")]),
-    "sensors.png": ("Sensor signals", [("wheelset.ddy", "wheelset lateral acc. [m/s2]"),
-                                       ("wheelset.dpsi", "wheelset yaw rate [rad/s]"),
-                                       ("wheelset.ddy_f", "frame lateral acc. [m/s2]")]),
+PLOTS = {  # file -> (title, one list of (signal, label) per axis)
+    "track_input.png": ("Alignment under the leading wheelset and the response",
+                        [[("track.alignment_1", "alignment xi"), ("wheelset.y", "wheelset y"),
+                          ("wheelset.y_f", "frame y_f")],
+                         [("wheelset.psi", "wheelset yaw psi [rad]")]]),
+    "sensors.png": ("Sensor signals (noise-free)",
+                    [[("wheelset.ddy", "wheelset lateral acc. [m/s2]")],
+                     [("wheelset.dpsi", "wheelset yaw rate [rad/s]")],
+                     [("wheelset.ddy_f", "frame lateral acc. [m/s2]")]]),
 }
 
 
