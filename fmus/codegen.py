@@ -96,11 +96,10 @@ def _output_dependencies(model: Model, slots: list[Slot]) -> dict[str, str]:
             continue
         names = []
         if isinstance(s.var, Output) and s.var.expr is not None:
+            # right after inputs are set the first-order hold has not started (tau = 0), so a
+            # rate input is no direct dependency
             free = {f.name for f in s.var.expr.free_symbols}
-            for u in model.inputs:
-                rate_used = any(v.rate == u.name and v.name in free for v in model.inputs)
-                if u.name in free or rate_used:
-                    names.append(u.name)
+            names = [u.name for u in model.inputs if u.name in free]
         elif isinstance(s.var, Output) and model.inputs:
             names = [u.name for u in model.inputs]  # unknown: hand-written, assume all
         deps[s.var.name] = " ".join(str(index[n]) for n in names)
@@ -310,18 +309,21 @@ def equations_c(model: Model) -> str:
     body, free = _assign_block(model, ders, [f"dx[{k}]" for k in range(len(ders))], source(True))
     L.append("void model_derivatives(ModelInstance *m, double t, const double *x, double *dx) {")
     if "v_tau" in free:
-        L.append("    const double v_tau = t - m->r[0]; /* time since the communication point */")
+        L.append("    const double v_tau = t - m->inputTime; /* first-order hold of the inputs */")
     if "t" not in free and "v_tau" not in free:
         L.append("    (void)t;")
     if not model.states:
         L.append("    (void)m; (void)x; (void)dx;")
     L += body + ["}", ""]
-    # outputs at the communication point (inputs as set: tau = 0)
-    body, free = _assign_block(model, [o.expr for o in model.outputs],
-                               [f"m->r[VR_{o.name}]" for o in model.outputs], source(False))
+    # outputs at r[0]: after a step the inputs are extrapolated as in the derivatives (the
+    # FMU's best knowledge of them there); once new inputs are set, tau = 0
+    outs = [model._substitute_held_inputs(sp.sympify(o.expr), TAU) for o in model.outputs]
+    body, free = _assign_block(model, outs, [f"m->r[VR_{o.name}]" for o in model.outputs], source(False))
     L.append("int model_outputs(ModelInstance *m) {")
     if "t" in free:
         L.append("    const double t = m->r[0];")
+    if "v_tau" in free:
+        L.append("    const double v_tau = m->r[0] - m->inputTime; /* first-order hold of the inputs */")
     L += body + ["    return 0;", "}", ""]
     L += ["int model_state_restored(ModelInstance *m) {", "    (void)m;", "    return 0;", "}", "",
           "void model_free(ModelInstance *m) {", "    (void)m;", "}", ""]

@@ -237,9 +237,10 @@ def test_rk4_matches_analytic_solution_with_first_order_hold_input(new_slave):
     # du (or evaluating stages at the wrong time) would show errors ~1e-6.
     np.testing.assert_allclose(rows[:, 1], x, rtol=0, atol=1e-10)
     np.testing.assert_allclose(rows[:, 2], v, rtol=0, atol=1e-10)
-    # a = dv/dt at the communication point, with the u set for the step that ends there
+    # a = dv/dt at the communication point: after a step the FMU extrapolates the input it
+    # was given over the step (first-order hold), so u(t) = u0 + du t exactly here
     np.testing.assert_allclose(rows[:-1, 3], -k * rows[:-1, 1] - c * rows[:-1, 2]
-                               + (u0 + du * rows[:-1, 0] - du * 0.01), atol=1e-12)
+                               + (u0 + du * rows[:-1, 0]), atol=1e-12)
     assert s.getReal([TIME]) == [t]
 
 
@@ -332,8 +333,7 @@ def test_set_rules_by_causality_variability_and_state(new_slave):
     assert s.getReal([U]) == [0.5]
     s.setReal([U, DU, C], [1.0, 0.5, 0.2])
     # a tunable parameter is checked again when it changes during the run
-    refused(s.setReal, [C, U], [-0.1, 2.0], "invalid tunable parameter")
-    assert "parameter c = -0.1 is below its minimum 0" in s.log.errors()[-2]
+    refused(s.setReal, [C, U], [-0.1, 2.0], "parameter c = -0.1 is below its minimum 0")
     assert s.getReal([C, U]) == [0.2, 1.0]  # the refused call changed nothing
     s.setBoolean([DAMPING_ON], [False])
     assert s.getBoolean([DAMPING_ON]) == [False]
@@ -348,8 +348,8 @@ def test_negative_parameter_fails_at_exit_initialization_mode(new_slave):
     with pytest.raises(FMICallException) as e:
         s.exitInitializationMode()
     assert e.value.status == FMI2_STATUS_ERROR
-    assert any("parameter k = -1 is below its minimum 0" in m for m in s.log.errors())
-    assert "fmi2ExitInitializationMode" in s.log.errors()[-1]
+    # the model's message is the last one: importers such as libcosim show only that
+    assert "parameter k = -1 is below its minimum 0" in s.log.errors()[-1]
     # still in initialisation mode: the importer can correct the value
     s.setReal([K], [1.0])
     s.exitInitializationMode()

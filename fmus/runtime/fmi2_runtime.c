@@ -91,6 +91,7 @@ typedef struct {
     double stopTime;
     fmi2Boolean stopTimeDefined;
     double lastSuccessfulTime;
+    double inputTime;
     fmi2Real r[N_REAL];
 #if N_INTEGER > 0
     fmi2Integer i[N_INTEGER];
@@ -406,6 +407,7 @@ static int set_start_values(ModelInstance *m) {
     m->stopTime = 0.0;
     m->stopTimeDefined = fmi2False;
     m->lastSuccessfulTime = 0.0;
+    m->inputTime = 0.0;
     return 1;
 }
 
@@ -538,12 +540,14 @@ fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean toleranceDefined, fm
     m->stopTime = stopTimeDefined ? stopTime : 0.0;
     m->r[0] = startTime;
     m->lastSuccessfulTime = startTime;
+    m->inputTime = startTime;
     return fmi2OK;
 }
 
 fmi2Status fmi2EnterInitializationMode(fmi2Component c) {
     ENTER("fmi2EnterInitializationMode", MASK_EnterInitializationMode);
     m->state = STATE_INITIALIZATION_MODE;
+    inst->outputsStale = 1; /* initial outputs are computed at the first get */
     return fmi2OK;
 }
 
@@ -566,10 +570,7 @@ fmi2Status fmi2ExitInitializationMode(fmi2Component c) {
     /* Every failure here leaves the instance in InitializationMode without model data:
        the model has logged which parameter is wrong, and the importer may correct it and
        call fmi2ExitInitializationMode again, or reset / free the instance. */
-    if (model_check_parameters(m) != 0) {
-        model_error(m, "fmi2ExitInitializationMode: invalid parameter value(s), see above");
-        return fmi2Error;
-    }
+    if (model_check_parameters(m) != 0) return fmi2Error; /* the model said which parameter */
 #if N_STATES > 0
     if (!(m->r[VR_INTEGRATOR_STEP] > 0.0) || !isfinite(m->r[VR_INTEGRATOR_STEP])) {
         model_error(m, "fmi2ExitInitializationMode: parameter %s = %g must be > 0 and finite",
@@ -577,6 +578,7 @@ fmi2Status fmi2ExitInitializationMode(fmi2Component c) {
         return fmi2Error;
     }
 #endif
+    release_model_data(m); /* a get in initialisation mode may have built it already */
     if (model_initialize(m) != 0) {
         release_model_data(m);
         model_error(m, "fmi2ExitInitializationMode: model initialisation failed");
@@ -678,15 +680,28 @@ static int tunable_parameter(const VariableInfo *info) {
    4.2.1: fmi2GetXXX returns values computed with the actual inputs), so a set marks the
    outputs stale and the next get recomputes them. */
 static void mark_outputs_stale(ModelInstance *m) {
-    if (m->state == STATE_STEP_COMPLETE) ((Instance *)m)->outputsStale = 1;
+    if (m->state & (STATE_STEP_COMPLETE | STATE_INITIALIZATION_MODE))
+        ((Instance *)m)->outputsStale = 1;
 }
 
+/* In initialisation mode the outputs need the model data too: check the parameters and
+   build it now (fmi2ExitInitializationMode builds it again from the final parameters). */
 static int refresh_outputs(ModelInstance *m, const char *function) {
     Instance *inst = (Instance *)m;
-    if (!inst->outputsStale || m->state != STATE_STEP_COMPLETE) return 1;
+    if (!inst->outputsStale || !(m->state & (STATE_STEP_COMPLETE | STATE_INITIALIZATION_MODE)))
+        return 1;
+    if (m->state == STATE_INITIALIZATION_MODE) {
+        if (model_check_parameters(m) != 0) return 0;
+        release_model_data(m);
+        if (model_initialize(m) != 0) {
+            release_model_data(m);
+            model_error(m, "%s: model initialisation failed", function);
+            return 0;
+        }
+    }
     inst->outputsStale = 0;
     if (model_outputs(m) != 0) {
-        model_error(m, "%s: computing the outputs for the new inputs failed", function);
+        model_error(m, "%s: computing the outputs failed", function);
         return 0;
     }
     return 1;
@@ -769,7 +784,7 @@ fmi2Status fmi2GetString(fmi2Component c, const fmi2ValueReference vr[], size_t 
 fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
                        const fmi2Real value[]) {
     size_t k;
-    int tunableChanged = 0;
+    int tunableChanged = 0, inputChanged = 0;
     fmi2Real *old;
     ENTER("fmi2SetReal", MASK_Set);
     if (nvr == 0) return fmi2OK;
@@ -791,8 +806,10 @@ fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nv
         if (m->state == STATE_STEP_COMPLETE && tunable_parameter(&model_real_info[vr[k]]))
             tunableChanged = 1;
     }
+    for (k = 0; k < nvr; k++) inputChanged |= model_real_info[vr[k]].causality == CAUSALITY_INPUT;
     if (!tunableChanged) {
         for (k = 0; k < nvr; k++) m->r[vr[k]] = value[k];
+        if (inputChanged) m->inputTime = m->r[0]; /* a first-order hold restarts from now */
         return fmi2OK;
     }
     /* a tunable parameter during the run: apply, check, undo on failure */
@@ -808,10 +825,10 @@ fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nv
     if (model_check_parameters(m) != 0) {
         for (k = nvr; k-- > 0;) m->r[vr[k]] = old[k]; /* reverse: repeated vrs */
         free(old);
-        model_error(m, "fmi2SetReal: invalid tunable parameter value(s) refused, see above");
         return fmi2Error;
     }
     free(old);
+    if (inputChanged) m->inputTime = m->r[0];
     return fmi2OK;
 }
 
@@ -953,6 +970,7 @@ fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *FMUstate) {
     st->stopTime = m->stopTime;
     st->stopTimeDefined = m->stopTimeDefined;
     st->lastSuccessfulTime = m->lastSuccessfulTime;
+    st->inputTime = m->inputTime;
     memcpy(st->r, m->r, sizeof st->r);
 #if N_INTEGER > 0
     memcpy(st->i, m->i, sizeof st->i);
@@ -1016,6 +1034,7 @@ fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate FMUstate) {
     m->stopTime = st->stopTime;
     m->stopTimeDefined = st->stopTimeDefined;
     m->lastSuccessfulTime = st->lastSuccessfulTime;
+    m->inputTime = st->inputTime;
     m->state = st->state;
 
     /* modelData is not part of the state: drop it, and rebuild it from the restored
@@ -1052,7 +1071,7 @@ fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate *FMUstate) {
    the version word read back in the wrong byte order fails the header check):
      "RFMU"  uint32 format version  uint32 N_REAL N_INTEGER N_BOOLEAN N_STRING
      uint32 strlen(MODEL_GUID)  GUID bytes
-     int32 state  int32 stopTimeDefined  double startTime stopTime lastSuccessfulTime
+     int32 state  int32 stopTimeDefined  double startTime stopTime lastSuccessfulTime inputTime
      double r[N_REAL]  int32 i[N_INTEGER]  int32 b[N_BOOLEAN]
      per string: uint32 length, bytes (no terminator) */
 #define SER_MAGIC "RFMU"
@@ -1113,6 +1132,7 @@ static void write_snapshot(Cursor *cu, const Snapshot *st) {
     put(cu, &st->startTime, sizeof(double));
     put(cu, &st->stopTime, sizeof(double));
     put(cu, &st->lastSuccessfulTime, sizeof(double));
+    put(cu, &st->inputTime, sizeof(double));
     put(cu, st->r, sizeof st->r);
     (void)k;
 #if N_INTEGER > 0
@@ -1201,6 +1221,7 @@ static int read_snapshot(ModelInstance *m, Cursor *cu, Snapshot *st) {
     get(cu, &st->startTime, sizeof(double));
     get(cu, &st->stopTime, sizeof(double));
     get(cu, &st->lastSuccessfulTime, sizeof(double));
+    get(cu, &st->inputTime, sizeof(double));
     get(cu, st->r, sizeof st->r);
     (void)k;
 #if N_INTEGER > 0

@@ -60,6 +60,9 @@ typedef struct ModelInstance {
     double stopTime;
     fmi2Boolean stopTimeDefined;
     double lastSuccessfulTime;
+    /* time at which the inputs were last set: inputs with a rate input are extrapolated
+       from here, u(t) = u + u_rate (t - inputTime), in derivatives and outputs alike */
+    double inputTime;
 
     /* the variables, by value reference; r[0] is time (the start of the current
        communication step while a step is being computed) */
@@ -105,9 +108,13 @@ int model_check_parameters(ModelInstance *m);
    parameters, then the outputs at the start time. Non-zero = error (already logged). */
 int model_initialize(ModelInstance *m);
 /* State derivatives at time t in [r[0], r[0] + h]; inputs are held over the step, or
-   extrapolated with their rate input where the model declares one (first-order hold). */
+   extrapolated from m->inputTime with their rate input where the model declares one
+   (first-order hold). */
 void model_derivatives(ModelInstance *m, double t, const double *x, double *dx);
-/* Outputs (and locals) from the states, inputs and parameters in r[] at time r[0]. */
+/* Outputs (and locals) from the states, inputs and parameters in r[] at time r[0] (inputs
+   with a rate extrapolated from m->inputTime, as in model_derivatives). Also called in
+   initialisation mode, after model_initialize, so the importer reads consistent initial
+   outputs (FMI 2.0.4, 4.2.4 InitialUnknowns). */
 int model_outputs(ModelInstance *m);
 /* After fmi2SetFMUstate: rebuild modelData from the restored parameters. */
 int model_state_restored(ModelInstance *m);

@@ -1,7 +1,7 @@
 /* Hand-written test model for the shared runtime (tests/test_runtime_c.py).
  *
  *   dx/dt = v
- *   dv/dt = -k x - c v + u(t),   u(t) = u + du (t - t_step)  (first-order hold, du = rate of u)
+ *   dv/dt = -k x - c v + u(t),   u(t) = u + du (t - inputTime)  (first-order hold, du = rate of u)
  *   a     = dv/dt at the communication point
  *
  * Test hooks: nan_mode = 1 makes dv/dt NaN from t >= nan_time, nan_mode = 2 makes the output
@@ -93,14 +93,15 @@ int model_initialize(ModelInstance *m) {
 }
 
 void model_derivatives(ModelInstance *m, double t, const double *x, double *dx) {
-    const double u = m->r[VR_u] + m->r[VR_du] * (t - m->r[VR_time]);
+    const double u = m->r[VR_u] + m->r[VR_du] * (t - m->inputTime);
     dx[0] = x[1];
     dx[1] = -m->r[VR_k] * x[0] - damping(m) * x[1] + u;
     if (m->i[VRI_nan_mode] == 1 && t >= m->r[VR_nan_time]) dx[1] = NAN;
 }
 
 int model_outputs(ModelInstance *m) {
-    m->r[VR_a] = -m->r[VR_k] * m->r[VR_x] - damping(m) * m->r[VR_v] + m->r[VR_u];
+    const double u = m->r[VR_u] + m->r[VR_du] * (m->r[VR_time] - m->inputTime);
+    m->r[VR_a] = -m->r[VR_k] * m->r[VR_x] - damping(m) * m->r[VR_v] + u;
     if (m->i[VRI_nan_mode] == 2 && m->r[VR_time] >= m->r[VR_nan_time]) m->r[VR_a] = NAN;
     return 0;
 }
