@@ -124,7 +124,10 @@ def model_description(model: Model, guid: str, source_files: list[str]) -> str:
         L.append(f'    <Unit name="{u}"><BaseUnit {base}/></Unit>')
     L += ['  </UnitDefinitions>', '  <LogCategories>']
     L += [f'    <Category name="{n}" description={quoteattr(d)}/>' for n, d in LOG_CATEGORIES.items()]
-    L += ['  </LogCategories>', '  <ModelVariables>']
+    start, stop, step = model.default_experiment
+    L += ['  </LogCategories>',
+          f'  <DefaultExperiment startTime="{start!r}" stopTime="{stop!r}" stepSize="{step!r}"/>',
+          '  <ModelVariables>']
     for i, s in enumerate(slots):
         v = s.var
         desc = v.description + (f" [source: {v.source}]" if v.source else "")

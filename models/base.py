@@ -86,6 +86,9 @@ class Model:
     states: list[State] = field(default_factory=list)
     outputs: list[Output] = field(default_factory=list)
     integrator_step: float = 1e-4  # s, default of the internal RK4 step parameter
+    # (start s, stop s, communication step s) for importers' defaults: seed 000's run,
+    # 20 s (400 m at 20 m/s) at 1 kHz
+    default_experiment: tuple[float, float, float] = (0.0, 20.0, 1e-3)
     c_sources: list[Path] = field(default_factory=list)  # hand-written C, if not generated
     resources: dict[str, Path] = field(default_factory=dict)  # name in resources/ -> file
     documentation: str = ""  # the model's equations, for the FMU's documentation/
