@@ -13,17 +13,16 @@ from __future__ import annotations
 import hashlib
 import uuid
 from dataclasses import dataclass
-from pathlib import Path
 from xml.sax.saxutils import quoteattr
 
 import sympy as sp
 
-from models.base import Input, Model, Output, Parameter, State, Variable
+from models.base import Model, Output, Parameter, Variable
 
 from .units import UNITS, check_unit
 
 GENERATOR = "railfmu"
-TAU = sp.Symbol("tau", real=True)  # time since the start of the communication step
+TAU = sp.Symbol("tau", real=True)  # time since the inputs were set (first-order hold)
 LOG_CATEGORIES = {
     "logStatusError": "Errors: bad parameters, illegal call sequences, non-finite values",
     "logStatusWarning": "Warnings",
@@ -40,11 +39,6 @@ class Slot:
     causality: str
     variability: str
     initial: str | None
-    is_state: bool = False
-
-
-def _type(v: Variable) -> str:
-    return v.type
 
 
 def layout(model: Model) -> list[Slot]:
@@ -71,7 +65,7 @@ def layout(model: Model) -> list[Slot]:
     for u in model.inputs:
         slots.append(Slot(u, take(u.type), "input", "continuous", None))
     for s in model.states:
-        slots.append(Slot(s, take("Real"), "output", "continuous", "exact", is_state=True))
+        slots.append(Slot(s, take("Real"), "output", "continuous", "exact"))
     for o in model.outputs:
         slots.append(Slot(o, take(o.type), "output", "continuous", "calculated"))
     return slots
@@ -135,7 +129,7 @@ def model_description(model: Model, guid: str, source_files: list[str]) -> str:
                  f'causality="{s.causality}" variability="{s.variability}"')
         if s.initial and not (s.causality == "parameter"):
             attrs += f' initial="{s.initial}"'
-        t = _type(v)
+        t = v.type
         ta = []
         if t == "Real" and v.unit:
             ta.append(f'unit="{v.unit}"')
