@@ -103,8 +103,11 @@ def cmd_run(args) -> int:
         by_name[comp].parameters.update(params)
     if args.seed is not None:
         by_name["track"].parameters["seed"] = args.seed
-    stop = args.stop_time or exp.STOP_TIME
-    step = args.step_size or exp.STEP_SIZE
+    stop = exp.STOP_TIME if args.stop_time is None else args.stop_time
+    step = exp.STEP_SIZE if args.step_size is None else args.step_size
+    for flag, value in (("--stop-time", stop), ("--step-size", step)):
+        if not (value > 0 and math.isfinite(value)):
+            raise UserError(f"{flag} {value:g}: must be a positive number of seconds")
     out = Path(args.out or f"out/{args.experiment}/{variant}")
     out.mkdir(parents=True, exist_ok=True)
     print(f"running {args.experiment}/{variant}: {stop:g} s at {step:g} s -> {out}", file=sys.stderr)

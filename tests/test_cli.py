@@ -36,6 +36,8 @@ def test_run_writes_signals_metrics_report_and_plots(tmp_path):
     (["run", "track_wheelset", "--set", "wheelset.m=-1"], "parameter m = -1 must be > 0"),
     (["run", "track_wheelset", "--set", "track.profile_file=/nonexistent/p.csv"], "p.csv: cannot open"),
     (["run", "track_wheelset", "--stop-time", "1", "--step-size", "0.3"], "does not divide"),
+    (["run", "track_wheelset", "--stop-time", "0"], "--stop-time 0: must be a positive"),
+    (["run", "track_wheelset", "--step-size", "nan"], "--step-size nan: must be a positive"),
     (["validate", "/nonexistent.fmu"], "no such file"),
 ])
 def test_bad_input_is_one_line_and_exit_2(tmp_path, args, message):
