@@ -222,10 +222,8 @@ def test_bad_parameters_python():
 # ---- 4. the FMU equals Python ----------------------------------------------------------------
 
 @pytest.fixture(scope="module")
-def track_fmu(tmp_path_factory):
-    from fmus.build import build_fmu
-
-    return build_fmu(TRACK, tmp_path_factory.mktemp("track_fmu"))
+def track_fmu(fmu_dir):
+    return fmu_dir / "TrackIrregularity.fmu"
 
 
 def _profile_csv(path):

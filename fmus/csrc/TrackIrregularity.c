@@ -47,15 +47,7 @@ static const fmi2ValueReference VR_RIGHT_RATE[N_WHEELSETS] = {
 static const fmi2ValueReference VR_AXLE[N_WHEELSETS] = {
     VR_axle_position_1, VR_axle_position_2, VR_axle_position_3, VR_axle_position_4};
 
-/* The parameters the tables are built from (model_state_restored rebuilds when they differ). */
 typedef struct {
-    int psd_level, seed;
-    double psd_scale, lambda_min, lambda_max, period_length, grid_step, half_contact_width;
-    char *profile_file;
-} TableKey;
-
-typedef struct {
-    TableKey key;
     /* random part: NULL when there are no lines; per grid point n the 6 doubles
        value[3] (alignment m, vertical profile m, cross-level angle rad) then slope[3] */
     double *grid;
@@ -412,30 +404,7 @@ static void free_data(TrackData *d) {
     free(d->tab_s);
     free(d->tab_y);
     free(d->tab_dy);
-    free(d->key.profile_file);
     free(d);
-}
-
-static TableKey current_key(ModelInstance *m) {
-    TableKey k;
-    k.psd_level = m->i[VRI_psd_level];
-    k.seed = m->i[VRI_seed];
-    k.psd_scale = m->r[VR_psd_scale];
-    k.lambda_min = m->r[VR_lambda_min];
-    k.lambda_max = m->r[VR_lambda_max];
-    k.period_length = m->r[VR_period_length];
-    k.grid_step = m->r[VR_grid_step];
-    k.half_contact_width = m->r[VR_half_contact_width];
-    k.profile_file = (char *)profile_file(m); /* borrowed */
-    return k;
-}
-
-static int same_key(const TableKey *a, const TableKey *b) {
-    return a->psd_level == b->psd_level && a->seed == b->seed && a->psd_scale == b->psd_scale &&
-           a->lambda_min == b->lambda_min && a->lambda_max == b->lambda_max &&
-           a->period_length == b->period_length && a->grid_step == b->grid_step &&
-           a->half_contact_width == b->half_contact_width &&
-           strcmp(a->profile_file, b->profile_file) == 0;
 }
 
 static int build_tables(ModelInstance *m) {
@@ -447,14 +416,6 @@ static int build_tables(ModelInstance *m) {
         model_error(m, "out of memory");
         return -1;
     }
-    d->key = current_key(m);
-    d->key.profile_file = (char *)malloc(len + 1);
-    if (!d->key.profile_file) {
-        free(d);
-        model_error(m, "out of memory");
-        return -1;
-    }
-    memcpy(d->key.profile_file, file, len + 1);
     if (build_random(m, d) != 0) {
         free_data(d);
         return -1;
@@ -597,12 +558,9 @@ int model_outputs(ModelInstance *m) {
     return 0;
 }
 
-int model_state_restored(ModelInstance *m) {
-    const TrackData *d = (const TrackData *)m->modelData;
-    TableKey k = current_key(m);
-    if (d && same_key(&d->key, &k)) return 0; /* the tables depend only on parameters */
-    return build_tables(m);
-}
+/* The runtime drops modelData before restoring a state; the tables depend only on the
+   restored parameters. */
+int model_state_restored(ModelInstance *m) { return build_tables(m); }
 
 void model_free(ModelInstance *m) {
     free_data((TrackData *)m->modelData);
