@@ -1,0 +1,99 @@
+"""A co-simulation system ready to run: what the SSP reader produces and the masters consume.
+
+Everything here is resolved: FMU files exist, parameter values are final (FMU defaults <
+SSD bindings < variant .ssv < command line), each connection carries one affine map
+``dst = factor * src + offset`` (the SSD's LinearTransformation composed with any unit
+conversion), and the experiment's time grid is fixed.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Protocol
+
+import numpy as np
+
+Value = float | int | bool | str
+
+
+@dataclass
+class Component:
+    name: str
+    fmu: Path
+    parameters: dict[str, Value] = field(default_factory=dict)  # FMU variable name -> value
+
+
+@dataclass
+class Connection:
+    src: str  # component name
+    src_var: str
+    dst: str
+    dst_var: str
+    factor: float = 1.0  # dst = factor * src + offset
+    offset: float = 0.0
+
+    @property
+    def identity(self) -> bool:
+        return self.factor == 1.0 and self.offset == 0.0
+
+    def __str__(self) -> str:
+        return f"{self.src}.{self.src_var} -> {self.dst}.{self.dst_var}"
+
+
+@dataclass
+class ObserverSpec:
+    """An estimator attached to the run (declared in the SSD's railfmu annotation).
+
+    ``cls`` is a dotted path ``package.module.Class``; ``inputs`` maps the observer's input
+    names to recorded signals ``component.variable``; ``truth`` maps estimate names to the
+    recorded signals they are scored against (metrics only, never fed to the estimator);
+    ``settings`` are keyword arguments of the class.
+    """
+    name: str
+    cls: str
+    inputs: dict[str, str]
+    truth: dict[str, str] = field(default_factory=dict)
+    settings: dict[str, Value] = field(default_factory=dict)
+
+
+@dataclass
+class System:
+    name: str
+    components: list[Component]
+    connections: list[Connection]
+    start_time: float = 0.0
+    stop_time: float = 1.0
+    step_size: float = 1e-3
+    record: list[str] = field(default_factory=list)  # "component.variable"; empty: every output
+    observers: list[ObserverSpec] = field(default_factory=list)
+    source: Path | None = None  # the SSD (or .ssp) it came from, for messages
+    description: str = ""
+
+    def component(self, name: str) -> Component:
+        for c in self.components:
+            if c.name == name:
+                return c
+        raise KeyError(name)
+
+    @property
+    def n_steps(self) -> int:
+        return round((self.stop_time - self.start_time) / self.step_size)
+
+
+class Sink(Protocol):
+    """Receives the recorded samples of a run: the CSV recorder, observers.
+
+    ``columns`` are ``time`` followed by the recorded signals. Masters that step in Python
+    call :meth:`write` once per communication point; the container path calls
+    :meth:`write_block` with many rows at once. ``close(complete)`` says whether the run
+    reached its stop time.
+    """
+
+    def open(self, columns: list[str]) -> None: ...
+
+    def write(self, row: np.ndarray) -> None: ...
+
+    def write_block(self, rows: np.ndarray) -> None: ...
+
+    def close(self, complete: bool) -> None: ...
