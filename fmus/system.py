@@ -69,6 +69,7 @@ class System:
     observers: list[ObserverSpec] = field(default_factory=list)
     source: Path | None = None  # the SSD (or .ssp) it came from, for messages
     description: str = ""
+    warnings: list[str] = field(default_factory=list)  # e.g. an unconnected input keeping its start
 
     def component(self, name: str) -> Component:
         for c in self.components:
