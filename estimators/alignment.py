@@ -1,0 +1,277 @@
+r"""Lateral track alignment from axle-box gyro + accelerometers: the linear Kalman filter of
+seed 000 §4 (eqs. 9-27), on the wheelset + suspended-frame design model (SM) of §3.3.
+
+Design model
+------------
+:data:`models.wheelset.WHEELSET` linearised about the centred wheelset
+(:meth:`models.base.Model.linearize`), ``dx = A x + B [xi, xi_rate]``,
+``[ddy, ddpsi, ddy_f] = C x + D [xi, xi_rate]``, with ``x = [y, psi, y_f, dy, dpsi, dy_f]``.
+The alignment ``xi`` is appended to the state (seed eq. 9) as a random walk (seed eq. 12
+``dxi/dt = 0`` plus process noise)::
+
+    x_a = [y, psi, y_f, dy, dpsi, dy_f, xi]                      (m, rad, m, m/s, rad/s, m/s, m)
+
+    dx_a/dt = F_c x_a + w,      F_c = [[A, B[:, xi]],            (seed eq. 15; B[:, xi] is
+                                       [0,     0   ]]             M^-1 K_d of eq. 16)
+    z       = H x_a + v,        H   = [[C[ddy],   D[ddy,   xi]],  wheelset lateral acc.  m/s2
+                                       [e_dpsi,   0          ],  axle-box gyro          rad/s
+                                       [C[ddy_f], D[ddy_f, xi]],  frame lateral acc.    m/s2
+                                       [0,        1          ]]  virtual xi = 0         m
+                                                                  (seed eq. 17)
+
+The ``xi`` column of ``H`` is ``D``: the gravitational stiffness puts ``xi`` directly into the
+wheelset's acceleration (``D[ddy_f, xi]`` is 0 for this model; it is kept for generality).
+The input ``xi_rate`` has no column: the SM's forces do not depend on it (it only feeds the
+FMU's first-order hold), and ``B[:, xi_rate]`` is zero.
+
+The last row is the seed's *virtual* measurement: a zero reading of ``xi`` with standard
+deviation ``sigma_virtual`` at every sample. It is needed, not only convenient: a rigid lateral
+shift of wheelset, frame and track together (``y``, ``y_f``, ``xi`` + c) changes no creepage,
+no suspension force and no gravitational force, so without it the three sensors cannot tell
+where the track is (the rank of the observability matrix would be 6). The zero reading pins
+that common mode and makes the estimate of ``xi`` a high-pass.
+
+Discretisation
+--------------
+Zero-order hold of the autonomous augmented system, ``F = expm(F_c dt)`` (scipy), which is
+exact for the linear model at every dt, and the process noise by Van Loan's method (Van Loan,
+IEEE TAC 23 (1978) 395)::
+
+    expm([[-F_c, Q_c], [0, F_c^T]] dt) = [[., Phi^-1 Q_d], [0, Phi^T]],   Q_d = Phi (Phi^-1 Q_d)
+
+``H`` needs no discretisation: ``z_k = H x_a(t_k)``. The seed discretises with an Euler step
+whose position rows use a second-order Taylor expansion (eqs. 18-19); ``expm`` is the exact
+version of that, costs nothing at run time (computed once), and is stable at any ``dt``.
+
+Noise
+-----
+* Measurement noise ``R = diag(sigma_acc^2, sigma_gyro^2, sigma_acc^2, sigma_virtual^2)``:
+  the seed's §5 sensor values, 0.01 m/s2 for the accelerometers and 5e-4 rad/s for the gyro.
+* Process noise ``Q_c = diag(0, 0, 0, q_acc, q_yaw, q_acc, q_xi)`` (continuous white-noise
+  intensities: m^2/s^3, rad^2/s^3, m^2/s). The seed estimates ``Q`` and ``R`` from the complete
+  model's residuals (eqs. 28-31); the filter has no complete model, so:
+
+  - ``q_xi``: between the ERRI B176 corner wavelengths (``2 pi / Omega_c`` = 7.6 m and
+    ``2 pi / Omega_r`` = 305 m) the alignment *is* a random walk in space: the one-sided
+    ``S_a(Omega) ~= A_a / Omega^2`` (m^2/(rad/m)). In time at speed ``V`` that is
+    ``A_a V / omega^2`` (one-sided, rad/s); a random walk of intensity ``q`` has the one-sided
+    PSD ``q / (pi omega^2)``, so ``q_xi = pi A_a V`` (1.33e-5 m^2/s for the low level,
+    ``psd_level`` 1, at 20 m/s).
+  - ``sigma_virtual``: on its own, a zero reading of a random walk at every sample tracks it
+    with the bandwidth ``omega_c = sqrt(q_xi / (sigma_virtual^2 dt))``: what is slower is
+    pulled to zero, as if the alignment were a first-order Markov process with that corner.
+    Below ``Omega_r`` the ERRI spectrum is flat, i.e. exactly such a process, so
+    ``omega_c = V Omega_r``: ``sigma_virtual = sqrt(q_xi / dt) / (V Omega_r)`` (0.28 m at
+    20 m/s and 1 kHz). It scales with ``1 / sqrt(dt)``, so the filter hardly changes with the
+    sample rate. **Deviation**: the seed uses 5 mm (its sample time is not stated). On our FMU
+    data at 1 kHz, 5 mm pins the common mode so hard that the long wavelengths are lost
+    (J_rel 0.92 in 3-200 m: D2 0.59, D3 0.99; 0.23 on a 1 mm / 20 m harmonic); the
+    spectrum-based value gives 0.17 and 0.11 (``tests/test_alignment.py``).
+  - ``q_acc``, ``q_yaw``: model error of the SM's accelerations. Default 0 (the design model
+    equals the simulated one); raise them when the data come from another model (a mismatch
+    in conicity, creep coefficients, or a full vehicle).
+
+Filter
+------
+Seed eqs. 20-26: ``x^- = F x^+``, ``P^- = F P^+ F^T + Q_d``, ``K = P^- H^T (H P^- H^T + R)^-1``,
+``x^+ = x^- + K (z - H x^-)``, ``P^+ = (I - K H) P^- (I - K H)^T + K R K^T`` (Joseph form).
+
+* ``steady_state=True`` (default): the fixed gain of the stationary filter, from the discrete
+  algebraic Riccati equation (``scipy.linalg.solve_discrete_are`` gives ``P^-``). A step is a
+  few small matrix-vector products.
+* ``steady_state=False``: ``filterpy.kalman.KalmanFilter`` (its ``update`` is the Joseph form)
+  from the initial a-priori covariance ``P0``, by default the stationary one (so both
+  versions give the same estimates); a cold start (a larger ``P0``) converges slowly, with
+  the slowest closed-loop pole (about 0.1 1/s at the defaults): the common mode is pinned
+  only by the virtual reading.
+
+The first sample is an update of the initial estimate ``x_a = 0`` (no prediction). A row with a
+non-finite measurement is skipped (predict only); the fixed-gain filter then keeps its gain.
+
+Observability (seed eq. 27): :meth:`AlignmentKalmanFilter.observability_rank` is the rank of
+``control.obsv(F, H)``; 7 for the seed's parameters.
+
+Deviations from the seed: ``expm``/Van Loan instead of the modified Euler step; ``Q`` and
+``sigma_virtual`` from the track spectrum instead of eqs. 28-31 and 5 mm; the seed's eq. 16
+gravitational term is replaced by the design model's derivation (see
+:mod:`models.wheelset`); the seed's eq. 17 prints the gyro and virtual rows with 6 entries,
+read here as selecting ``dpsi`` and ``xi``.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any, ClassVar
+
+import control
+import numpy as np
+import scipy.linalg as sla
+from filterpy.kalman import KalmanFilter
+
+from models import track
+from models.wheelset import WHEELSET
+
+from .observer import Observer
+
+STATES = ("y", "psi", "y_f", "dy", "dpsi", "dy_f", "xi")
+_STATE_UNITS = ("m", "rad", "m", "m/s", "rad/s", "m/s", "m")
+
+
+def q_xi_from_spectrum(V: float, level: int = 1) -> float:
+    """Random-walk intensity (m^2/s) of the alignment at speed ``V`` (m/s) that matches the
+    ERRI B176 alignment spectrum between its corner wavelengths: ``pi A_a V``."""
+    if int(level) not in track.ERRI_B176_LEVELS:
+        raise ValueError(f"psd_level must be 1 (low) or 2 (high) to derive q_xi, not {level!r}")
+    return math.pi * track.ERRI_B176_LEVELS[int(level)][0] * V
+
+
+def sigma_virtual_from_spectrum(q_xi: float, V: float, dt: float) -> float:
+    """Standard deviation (m) of the virtual zero reading of ``xi`` at every sample ``dt`` (s)
+    that puts the forgetting of the random walk ``q_xi`` (m^2/s) at the ERRI B176 corner
+    ``Omega_r`` at speed ``V`` (m/s): ``sqrt(q_xi / dt) / (V Omega_r)``."""
+    return math.sqrt(q_xi / dt) / (V * track.OMEGA_R)
+
+
+def _as_bool(value: Any, name: str) -> bool:
+    """A boolean setting, also from the text of an SSD annotation ("true"/"false")."""
+    if isinstance(value, str):
+        if value.strip().lower() in ("true", "1", "yes"):
+            return True
+        if value.strip().lower() in ("false", "0", "no"):
+            return False
+        raise ValueError(f"AlignmentKalmanFilter: {name} must be true or false, not {value!r}")
+    return bool(value)
+
+
+def van_loan(F_c: np.ndarray, Q_c: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
+    """(Phi, Q_d) of ``dx = F_c x + w``, ``E[w w^T] = Q_c delta``, sampled at ``dt``."""
+    n = F_c.shape[0]
+    M = np.zeros((2 * n, 2 * n))
+    M[:n, :n] = -F_c
+    M[:n, n:] = Q_c
+    M[n:, n:] = F_c.T
+    E = sla.expm(M * dt)
+    Phi = E[n:, n:].T
+    Q_d = Phi @ E[:n, n:]
+    return Phi, 0.5 * (Q_d + Q_d.T)
+
+
+class AlignmentKalmanFilter(Observer):
+    """Seed 000's Kalman filter of the lateral track alignment under one wheelset.
+
+    Inputs: ``ddy`` wheelset lateral acceleration (m/s2), ``dpsi`` wheelset yaw rate (rad/s),
+    ``ddy_f`` suspended-frame lateral acceleration (m/s2); the virtual ``xi = 0`` is internal.
+    Outputs: the state ``y`` (m), ``psi`` (rad), ``y_f`` (m), ``dy`` (m/s), ``dpsi`` (rad/s),
+    ``dy_f`` (m/s), and the alignment ``xi`` (m).
+
+    Settings: ``V`` (m/s, 20), any :data:`models.wheelset.WHEELSET` parameter (``alpha``,
+    ``f11``, ...), ``sigma_acc`` (m/s2, 0.01), ``sigma_gyro`` (rad/s, 5e-4), ``sigma_virtual``
+    (m; default :func:`sigma_virtual_from_spectrum`), ``q_xi`` (m^2/s; default
+    :func:`q_xi_from_spectrum` at ``V`` and ``psd_level``), ``psd_level`` (1), ``q_acc``
+    (m^2/s^3, 0), ``q_yaw`` (rad^2/s^3, 0), ``steady_state`` (True), ``P0`` (7 standard
+    deviations of the initial estimate; default: the stationary a-priori covariance; the
+    time-varying filter only). The equations are in the module docstring.
+    """
+
+    inputs: ClassVar[tuple[str, ...]] = ("ddy", "dpsi", "ddy_f")
+    outputs: ClassVar[tuple[str, ...]] = STATES
+    units: ClassVar[dict[str, str]] = {"ddy": "m/s2", "dpsi": "rad/s", "ddy_f": "m/s2",
+                                       **dict(zip(STATES, _STATE_UNITS))}
+
+    # the filter's own settings and their defaults (None: derived, see the module docstring)
+    _OWN: ClassVar[dict[str, Any]] = {
+        "sigma_acc": 0.01, "sigma_gyro": 5e-4, "sigma_virtual": None, "q_xi": None, "psd_level": 1,
+        "q_acc": 0.0, "q_yaw": 0.0, "steady_state": True, "P0": None}
+
+    def __init__(self, dt: float, **settings: Any) -> None:
+        super().__init__(dt, **settings)
+        known = set(self._OWN) | {p.name for p in WHEELSET.parameters}
+        unknown = sorted(set(settings) - known)
+        if unknown:
+            raise ValueError(f"AlignmentKalmanFilter: unknown setting(s) {unknown}")
+        s = {**self._OWN, **settings}
+        self.params = {**WHEELSET.default_parameters(),
+                       **{k: float(v) for k, v in s.items() if k in WHEELSET.default_parameters()}}
+        WHEELSET.check_parameters(self.params)
+        V = self.params["V"]
+        self.q_xi = float(s["q_xi"]) if s["q_xi"] is not None else q_xi_from_spectrum(V, s["psd_level"])
+        self.sigma_virtual = (float(s["sigma_virtual"]) if s["sigma_virtual"] is not None
+                              else sigma_virtual_from_spectrum(self.q_xi, V, self.dt))
+        self.steady_state = _as_bool(s["steady_state"], "steady_state")
+
+        A, B, C, D = WHEELSET.linearize(self.params)
+        i_xi = [u.name for u in WHEELSET.inputs].index("xi")
+        rows = [o.name for o in WHEELSET.outputs]
+        F_c = np.zeros((7, 7))
+        F_c[:6, :6] = A
+        F_c[:6, 6] = B[:, i_xi]
+        H = np.zeros((4, 7))
+        H[0, :6], H[0, 6] = C[rows.index("ddy")], D[rows.index("ddy"), i_xi]
+        H[1, STATES.index("dpsi")] = 1.0
+        H[2, :6], H[2, 6] = C[rows.index("ddy_f")], D[rows.index("ddy_f"), i_xi]
+        H[3, 6] = 1.0
+        Q_c = np.diag([0.0, 0.0, 0.0, s["q_acc"], s["q_yaw"], s["q_acc"], self.q_xi])
+        self.F_c, self.H, self.Q_c = F_c, H, Q_c
+        self.F, self.Q = van_loan(F_c, Q_c, self.dt)
+        self.R = np.diag(np.square([s["sigma_acc"], s["sigma_gyro"], s["sigma_acc"], self.sigma_virtual]))
+
+        # stationary filter: P^- from the DARE of the dual (estimation) problem
+        self.P_prior = sla.solve_discrete_are(self.F.T, self.H.T, self.Q, self.R)
+        S = self.H @ self.P_prior @ self.H.T + self.R
+        self.K = np.linalg.solve(S, self.H @ self.P_prior).T
+        I_KH = np.eye(7) - self.K @ self.H
+        self.P_post = I_KH @ self.P_prior @ I_KH.T + self.K @ self.R @ self.K.T
+        if s["P0"] is None:
+            self.P0 = self.P_prior.copy()
+        else:
+            std = np.asarray(s["P0"], dtype=float)
+            if std.shape != (7,) or not np.all(np.isfinite(std)) or np.any(std <= 0):
+                raise ValueError("AlignmentKalmanFilter: P0 needs 7 positive standard deviations")
+            self.P0 = np.diag(np.square(std))
+        self._zbuf = np.zeros(4)  # [ddy, dpsi, ddy_f, 0]: the virtual reading stays 0
+        self.reset()
+
+    # -- Observer hooks ------------------------------------------------------------------------
+    def _reset(self) -> None:
+        self._x = np.zeros(7)
+        if not self.steady_state:
+            kf = KalmanFilter(dim_x=7, dim_z=4)
+            kf.F, kf.H, kf.Q, kf.R = self.F, self.H, self.Q, self.R
+            kf.P = self.P0.copy()
+            self._kf = kf
+
+    def _predict(self) -> None:
+        if self.steady_state:
+            self._x = self.F @ self._x
+        else:
+            self._kf.predict()
+
+    def _update(self, z: np.ndarray) -> None:
+        zb = self._zbuf
+        zb[:3] = z
+        if self.steady_state:
+            x = self._x
+            self._x = x + self.K @ (zb - self.H @ x)
+        else:
+            self._kf.update(zb)
+
+    def _estimate(self) -> np.ndarray:
+        if self.steady_state:
+            return self._x.copy()
+        return self._kf.x[:, 0].copy()
+
+    # -- diagnostics -------------------------------------------------------------------------
+    @property
+    def covariance(self) -> np.ndarray:
+        """Posterior covariance of the current estimate (the stationary one for the fixed gain)."""
+        return self.P_post.copy() if self.steady_state else self._kf.P.copy()
+
+    def observability_rank(self) -> int:
+        """Rank of the observability matrix of (F, H) (seed eq. 27); 7 = observable."""
+        return int(np.linalg.matrix_rank(control.obsv(self.F, self.H)))
+
+    def finish(self) -> dict:
+        P = self.covariance
+        return {**super().finish(), "steady_state": self.steady_state, "q_xi": self.q_xi,
+                "sigma_virtual": self.sigma_virtual, "sigma_xi": float(math.sqrt(P[6, 6])),
+                "observability_rank": self.observability_rank()}
