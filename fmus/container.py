@@ -1,0 +1,331 @@
+"""The native fast path: the whole system as one FMPy container FMU (``fmpy.container_fmu``).
+
+FMPy's container is a Rust binary that loads the components' FMUs and couples them itself,
+driven by a JSON configuration; :func:`build_container` writes it from a :class:`System`:
+
+* every component, with its FMU extracted into the container's ``resources/<stem>/``;
+* every connection (all must be identity maps: the container copies values unchanged);
+* every parameter value of ``Component.parameters`` as a container parameter
+  ``component.name`` with that start value (Real, Integer, Boolean and String), which the
+  container sets on the component right after instantiating it;
+* every recorded signal as a container output ``component.variable``.
+
+What the container does (FMPy 0.3.32; the same order as our Jacobi master, so their
+samples can be compared one to one): ``fmi2ExitInitializationMode`` copies every
+connection, in the order given, then lets the components leave initialisation; every
+``fmi2DoStep`` steps all components from the container's time ``t`` and then copies every
+connection (outputs at ``t + h`` into the inputs). Sampling after the container's step is
+therefore the Jacobi sample "after the transfer" at ``t + h``, direct-feedthrough outputs
+included. The C driver passes the container's own clock (read back from value reference 0
+after every step) as the next communication point; on the test systems its time values and
+every sample equal the Jacobi master's (``start + k h``) bit for bit.
+
+Pitfalls of fmpy 0.3.32 handled here: a connection's ``variableType`` must be ``Float64``
+(FMPy copies the FMI 2 type ``Real`` from the connector and the binary rejects it); the
+independent ``time`` must be the first model variable (value reference 0) and stay out of
+``variableMappings``; start values must be strings in ``container.json``.
+
+:func:`load_driver` compiles ``runtime/container_driver.c`` (a loop of doStep + getReal into
+a numpy buffer) at first use into a cache folder; without a C compiler the master falls back
+to a ctypes loop.
+"""
+
+from __future__ import annotations
+
+import copy
+import ctypes
+import hashlib
+import json
+import os
+import platform
+import shutil
+import subprocess
+import sys
+import tempfile
+import uuid
+import zipfile
+from pathlib import Path
+
+import fmpy.container_fmu as fmpy_container
+from fmpy import read_model_description
+from fmpy.container_fmu import write_configuration
+from fmpy.container_fmu.config import Component as CComponent
+from fmpy.container_fmu.config import Configuration
+from fmpy.container_fmu.config import Connection as CConnection
+from fmpy.fmi2 import FMU2Slave
+from fmpy.model_description import (
+    CoSimulation,
+    DefaultExperiment,
+    ModelDescription,
+    ModelVariable,
+    Unknown,
+    write_model_description,
+)
+
+from .errors import UserError
+from .slave import Slave
+from .system import System
+
+DRIVER_SOURCE = Path(__file__).parent / "runtime" / "container_driver.c"
+
+
+def _literal(var: ModelVariable, value, where: str) -> str:
+    """The start value as the container's JSON wants it (a string the Rust side parses)."""
+    try:
+        if var.type == "Real":
+            return repr(float(value))
+        if var.type == "Integer":
+            return str(int(value))
+        if var.type == "Boolean":
+            if isinstance(value, str):
+                if value.strip().lower() not in ("true", "false", "1", "0"):
+                    raise ValueError(value)
+                value = value.strip().lower() in ("true", "1")
+            return "true" if value else "false"
+        if var.type == "String":
+            return str(value)
+    except (TypeError, ValueError):
+        raise UserError(f"{where}: {value!r} is not a valid {var.type} value") from None
+    raise UserError(f"{where}: variables of type {var.type} cannot be set in a container FMU "
+                    "(use --master jacobi)")
+
+
+def check_containable(system: System) -> None:
+    """UserError for what the container cannot run (before anything is built)."""
+    for c in system.connections:
+        if not c.identity:
+            raise UserError(f"connection {c} maps dst = {c.factor!r} * src + {c.offset!r}: FMPy's "
+                            "container FMU copies values unchanged, so it cannot run this system; "
+                            "use --master jacobi (or gauss-seidel)")
+    stems: dict[str, Path] = {}
+    for comp in system.components:
+        path = Path(comp.fmu).resolve()
+        other = stems.setdefault(path.stem, path)
+        if other != path:
+            raise UserError(f"components use two different FMUs named {path.stem}.fmu ({other} and "
+                            f"{path}): the container extracts each FMU by its file name; use --master jacobi")
+
+
+_PLATFORMS = [  # (folder in fmpy's container_fmu/binaries, FMI 2 platform folder, library)
+    ("aarch64-darwin", "darwin64", "container_fmu.dylib"),
+    ("x86_64-darwin", "darwin64", "container_fmu.dylib"),
+    ("x86_64-linux", "linux64", "container_fmu.so"),
+    ("x86_64-windows", "win64", "container_fmu.dll"),
+]
+
+
+def _host_platform() -> str:
+    machine = platform.machine().lower()
+    arch = "aarch64" if machine in ("arm64", "aarch64") else "x86_64"
+    osname = {"darwin": "darwin", "win32": "windows"}.get(sys.platform, "linux")
+    return f"{arch}-{osname}"
+
+
+def configuration(system: System) -> Configuration:
+    """The ``fmpy.container_fmu`` configuration of ``system`` (UserError for what the
+    container cannot run or what names nothing)."""
+    check_containable(system)
+    components: dict[str, CComponent] = {}
+    variables: dict[str, dict[str, ModelVariable]] = {}
+    for comp in system.components:
+        if comp.name in components:
+            raise UserError(f"component {comp.name!r} appears twice")
+        if not Path(comp.fmu).is_file():
+            raise UserError(f"{comp.fmu}: FMU not found (run `railfmu build`)")
+        md = read_model_description(str(comp.fmu))
+        if md.fmiVersion != "2.0" or md.coSimulation is None:
+            raise UserError(f"{comp.fmu}: the container path runs FMI 2.0 co-simulation FMUs only")
+        components[comp.name] = CComponent(name=comp.name, filename=Path(comp.fmu).resolve(),
+                                           modelDescription=md)
+        variables[comp.name] = {v.name: v for v in md.modelVariables}
+
+    def var(comp: str, name: str) -> ModelVariable:
+        if comp not in variables:
+            raise UserError(f"unknown component {comp!r}")
+        try:
+            return variables[comp][name]
+        except KeyError:
+            raise UserError(f"{Path(components[comp].filename).name} ({comp}): no variable {name!r}") from None
+
+    mappings: dict[ModelVariable, list] = {}
+    by_name: dict[str, ModelVariable] = {}
+    for comp in system.components:
+        for name, value in comp.parameters.items():
+            inner = var(comp.name, name)
+            cv = ModelVariable(name=f"{comp.name}.{name}", type=inner.type, causality="parameter",
+                               variability="fixed", initial="exact",
+                               start=_literal(inner, value, f"{comp.name}.{name}"),
+                               description=inner.description)
+            mappings[cv] = [(components[comp.name], inner)]
+            by_name[cv.name] = cv
+    for signal in record_list(system, variables):
+        comp, name = signal.split(".", 1)
+        inner = var(comp, name)
+        if inner.type != "Real":
+            raise UserError(f"recorded signal {signal} is {inner.type}: only Real signals can be recorded")
+        if signal in by_name:  # a recorded parameter: read through the parameter's variable
+            continue
+        cv = ModelVariable(name=signal, type="Real", causality="output", variability="continuous",
+                           initial="calculated", description=inner.description)
+        mappings[cv] = [(components[comp], inner)]
+        by_name[signal] = cv
+
+    connections = []
+    for c in system.connections:
+        src, dst = var(c.src, c.src_var), var(c.dst, c.dst_var)
+        if src.type != "Real" or dst.type != "Real":
+            raise UserError(f"connection {c}: only Real connections are supported ({src.type} -> {dst.type})")
+        src64 = copy.copy(src)
+        src64.type = "Float64"  # fmpy writes the connector's type; the binary wants Float64
+        connections.append(CConnection(components[c.src], [src64], components[c.dst], [dst]))
+
+    token = str(uuid.uuid5(uuid.NAMESPACE_URL, "railfmu-container:" + json.dumps({
+        "name": system.name, "step": system.step_size,
+        "components": [(c.name, str(Path(c.fmu).resolve()), components[c.name].modelDescription.guid)
+                       for c in system.components],
+        "connections": [str(c) for c in system.connections],
+        "variables": [(v.name, v.type, v.start) for v in mappings],
+    }, sort_keys=True, default=str)))
+    md = ModelDescription(
+        fmiVersion="2.0", modelName=system.name or "system", instantiationToken=token,
+        description=f"railfmu container of {system.name} (FMPy container FMU)",
+        generationTool="railfmu (fmus.container)",
+        coSimulation=CoSimulation(modelIdentifier="container_fmu", fixedInternalStepSize=system.step_size),
+        defaultExperiment=DefaultExperiment(startTime=repr(system.start_time), stopTime=repr(system.stop_time),
+                                            stepSize=repr(system.step_size)),
+        modelVariables=[ModelVariable(name="time", type="Real", causality="independent",
+                                      variability="continuous"), *mappings],
+    )
+    # the container has no inputs: its outputs depend on nothing but time and parameters
+    md.outputs = [Unknown(variable=v, dependencies=[]) for v in mappings if v.causality == "output"]
+    md.initialUnknowns = [Unknown(variable=v) for v in mappings if v.causality == "output"]
+    return Configuration(parallelDoStep=False, modelDescription=md, components=list(components.values()),
+                         connections=connections, variableMappings=mappings)
+
+
+def write_container_dir(config: Configuration, unzipdir: Path, all_platforms: bool = True) -> Path:
+    """The unzipped container FMU in ``unzipdir`` (created): what fmpy's
+    ``create_container_fmu`` writes before it zips, with the binary of this machine only
+    unless ``all_platforms``. (Its zip step is not used: in 0.3.32 it archives the folder
+    into a file inside that folder, so the FMU holds a stray copy of itself, and it deflates
+    4 MB of binaries, 0.3 s per run.)"""
+    unzipdir = Path(unzipdir)
+    unzipdir.mkdir(parents=True, exist_ok=True)
+    for component in config.components:
+        fmu_path = Path(component.filename)
+        target = unzipdir / "resources" / fmu_path.stem
+        if not target.is_dir():  # two instances of one FMU share its folder
+            with zipfile.ZipFile(fmu_path) as z:
+                z.extractall(target)
+    config.modelDescription.coSimulation.modelIdentifier = "container_fmu"
+    for i, variable in enumerate(config.modelDescription.modelVariables):
+        variable.valueReference = i  # time is 0; the binary maps i + 1 to variables[i]
+    write_model_description(config.modelDescription, unzipdir / "modelDescription.xml")
+    write_configuration(config, unzipdir / "resources" / "container.json")
+    binaries = Path(fmpy_container.__file__).parent / "binaries"
+    host = _host_platform()
+    for tuple_, fmi2_platform, library in _PLATFORMS:
+        if all_platforms or tuple_ == host:
+            (unzipdir / "binaries" / fmi2_platform).mkdir(parents=True, exist_ok=True)
+            shutil.copyfile(binaries / tuple_ / library, unzipdir / "binaries" / fmi2_platform / library)
+    return unzipdir
+
+
+def build_container(system: System, out: Path) -> Path:
+    """Write the container FMU of ``system`` to ``out`` (a ``.fmu`` with the container
+    binaries of every platform fmpy ships); returns ``out``."""
+    out = Path(out)
+    config = configuration(system)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    work = Path(tempfile.mkdtemp(prefix="railfmu-container-"))
+    try:
+        write_container_dir(config, work / "fmu")
+        tmp = out.with_name(out.name + ".part")
+        with zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as z:
+            for path in sorted((work / "fmu").rglob("*")):
+                z.write(path, path.relative_to(work / "fmu").as_posix())
+        os.replace(tmp, out)
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
+    return out
+
+
+def record_list(system: System, variables: dict[str, dict[str, ModelVariable]]) -> list[str]:
+    """The recorded signals: ``system.record``, or every Real output in component order."""
+    if system.record:
+        for signal in system.record:
+            if "." not in signal:
+                raise UserError(f"recorded signal {signal!r}: expected component.variable")
+        return list(system.record)
+    return [f"{c.name}.{v.name}" for c in system.components for v in variables[c.name].values()
+            if v.causality == "output" and v.type == "Real"]
+
+
+class ContainerSlave(Slave):
+    """The container FMU through :class:`Slave` (its logger, its error messages), loaded
+    from an unzipped folder (:func:`write_container_dir`), which :meth:`close` removes.
+    A failed instantiation (the container sets the parameters' start values there, so a
+    refused parameter fails it) becomes a UserError with what the FMUs logged."""
+
+    def __init__(self, unzipdir: Path, instance_name: str):
+        self.path = Path(unzipdir).with_suffix(".fmu")  # for messages: "<system>.fmu (<name>)"
+        self.name = instance_name
+        self.dir = str(unzipdir)
+        self.md = read_model_description(self.dir)
+        self.vars = {v.name: v for v in self.md.modelVariables}
+        self.messages = []
+        self.fmu = FMU2Slave(guid=self.md.guid, unzipDirectory=self.dir,
+                             modelIdentifier=self.md.coSimulation.modelIdentifier,
+                             instanceName=instance_name)
+        self._callbacks = self._make_callbacks()
+        try:
+            self.fmu.instantiate(callbacks=self._callbacks)
+        except Exception as exc:  # noqa: BLE001 (FMPy raises a bare Exception)
+            logged = "; ".join(m for s, _, m in self.messages if s in ("Error", "Fatal"))
+            self.close()
+            raise UserError(f"{self.path.name} ({instance_name}): instantiation failed: {logged or exc}") from None
+
+
+# -- the C driver -------------------------------------------------------------------------
+
+_driver = None  # the loaded library, False when it cannot be built
+
+
+def _cache_dir() -> Path:
+    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    return Path(base) / "railfmu"
+
+
+def load_driver():
+    """``railfmu_run_steps`` from the compiled driver (built once per source version), or
+    ``None`` when no C compiler works (the master then steps through ctypes)."""
+    global _driver
+    if _driver is not None:
+        return _driver or None
+    cc = os.environ.get("CC", "gcc")
+    cmd = [cc, "-std=c99", "-O2", "-Wall", "-Wextra", "-Werror", "-shared", "-fPIC"]
+    src = DRIVER_SOURCE.read_bytes()
+    key = hashlib.sha256(src + " ".join(cmd).encode()).hexdigest()[:16]
+    lib = _cache_dir() / f"container_driver-{key}.so"
+    try:
+        if not lib.is_file():
+            lib.parent.mkdir(parents=True, exist_ok=True)
+            tmp = lib.with_suffix(f".{os.getpid()}.tmp")
+            res = subprocess.run([*cmd, str(DRIVER_SOURCE), "-o", str(tmp), "-lm"],
+                                 check=False, capture_output=True, text=True)
+            if res.returncode != 0:
+                raise OSError(res.stderr.strip())
+            os.replace(tmp, lib)  # atomic: concurrent runs never load half a file
+        dll = ctypes.CDLL(str(lib))
+    except OSError:
+        _driver = False
+        return None
+    fn = dll.railfmu_run_steps
+    fn.argtypes = [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p, ctypes.POINTER(ctypes.c_double),
+                   ctypes.c_double, ctypes.c_double, ctypes.c_long, ctypes.c_long, ctypes.c_void_p,
+                   ctypes.c_size_t, ctypes.c_void_p, ctypes.c_size_t, ctypes.POINTER(ctypes.c_long),
+                   ctypes.POINTER(ctypes.c_int)]
+    fn.restype = ctypes.c_int
+    fn._keep = dll
+    _driver = fn
+    return fn

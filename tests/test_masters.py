@@ -1,0 +1,257 @@
+"""The three masters of fmus.masters on track -> wheelset (2 s at 1 ms).
+
+What is asserted (and measured when this was written):
+
+* jacobi equals the old ``fmus.cosim.simulate`` bit for bit (every recorded column);
+* container equals jacobi bit for bit (tolerance 0: states, inputs and the
+  direct-feedthrough outputs ddy/ddpsi alike), also with a String parameter (a measured
+  profile file found in the track FMU's resources inside the container);
+* gauss-seidel equals jacobi exactly on the track (a source: nothing to couple) and on a
+  system without connections; on the wheelset it differs by O(h): halving h halves the
+  largest difference in y (ratio 2.0 +- 0.3 asserted);
+* a LinearTransformation factor 2 on xi and xi_rate doubles the response to a 1 mm step
+  of the alignment (linear model: y(2) = 2 y(1) to 1e-12; settled near 2 mm after 4 s);
+* an algebraic loop (two wheelsets, ddy -> xi both ways; ddy depends on xi in the
+  ModelStructure) is refused by gauss-seidel, naming both connections; a cycle through y
+  (no feedthrough) runs, with the delayed connection in the notes;
+* the CSV recorder writes n_steps + 1 rows that read back to the result exactly; a run
+  stopped by an overflow (factor 1e308 on xi, a 1 mm step at t = 1 s) raises UserError
+  naming wheelset.ddy at t = 1 s and leaves a readable CSV of the rows before it;
+* the container refuses a non-identity connection, suggesting --master jacobi.
+"""
+
+from __future__ import annotations
+
+import csv
+import itertools
+import math
+
+import numpy as np
+import pytest
+from fmpy import read_model_description
+
+from fmus import cosim
+from fmus.errors import UserError
+from fmus.masters import MASTERS, gauss_seidel_order, run
+from fmus.recorder import ArrayRecorder, CsvRecorder
+from fmus.system import Component, Connection, System
+
+TRACK = {"psd_level": 1, "seed": 3, "harmonic_lateral_amplitude": 1e-3, "harmonic_wavelength": 15.66}
+STEP = {"psd_level": 0, "step_lateral": 1e-3, "step_position": 2.0}  # 1 mm at t = 0.1 s (20 m/s)
+
+
+def track_wheelset(fmu_dir, track=TRACK, factor=1.0, step_size=1e-3, stop_time=2.0, record=()):
+    return System(
+        name="track_wheelset",
+        components=[Component("track", fmu_dir / "TrackIrregularity.fmu", dict(track)),
+                    Component("wheelset", fmu_dir / "WheelsetLateral.fmu", {})],
+        connections=[Connection("track", "alignment_1", "wheelset", "xi", factor=factor),
+                     Connection("track", "alignment_rate_1", "wheelset", "xi_rate", factor=factor)],
+        stop_time=stop_time, step_size=step_size, record=list(record))
+
+
+@pytest.fixture(scope="module")
+def results(fmu_dir):
+    system = track_wheelset(fmu_dir)
+    return {m: run(system, m, progress=False) for m in MASTERS}
+
+
+def col(result, name):
+    return result.data[:, result.columns.index(name)]
+
+
+def test_jacobi_equals_cosim_simulate(fmu_dir, results):
+    old = cosim.simulate(
+        [cosim.Component("track", fmu_dir / "TrackIrregularity.fmu", dict(TRACK)),
+         cosim.Component("wheelset", fmu_dir / "WheelsetLateral.fmu", {})],
+        [cosim.Connection("track", "alignment_1", "wheelset", "xi"),
+         cosim.Connection("track", "alignment_rate_1", "wheelset", "xi_rate")],
+        stop_time=2.0, step_size=1e-3, progress=False)
+    new = results["jacobi"]
+    assert new.complete and new.master == "jacobi"
+    assert new.columns == list(old)
+    assert new.data.shape == (2001, len(old))
+    np.testing.assert_array_equal(new.data, np.array([old[c] for c in new.columns]).T)
+
+
+def test_container_equals_jacobi_bit_for_bit(results):
+    jac, con = results["jacobi"], results["container"]
+    assert con.columns == jac.columns and con.complete
+    np.testing.assert_array_equal(con.data, jac.data)  # tolerance 0, ddy (feedthrough) included
+    # the samples are "after the transfer": the input holds its source's output at t
+    np.testing.assert_array_equal(col(con, "wheelset.xi") if "wheelset.xi" in con.columns
+                                  else col(con, "track.alignment_1"), col(jac, "track.alignment_1"))
+
+
+def test_container_with_string_parameter(fmu_dir):
+    # a measured profile from the track FMU's resources/: the container extracts the FMU
+    # and passes the String start value
+    system = track_wheelset(fmu_dir, track={"psd_level": 0, "profile_file": "isolated_alignment_defect.csv",
+                                                   "s_start": 30.0},
+                            record=["track.alignment_1", "wheelset.xi", "wheelset.y", "wheelset.ddy"])
+    jac, con = run(system, "jacobi", progress=False), run(system, "container", progress=False)
+    assert np.abs(col(jac, "track.alignment_1")).max() > 0
+    np.testing.assert_array_equal(con.data, jac.data)
+    np.testing.assert_array_equal(col(con, "wheelset.xi"), col(con, "track.alignment_1"))
+
+
+def test_container_refuses_affine_connection(fmu_dir):
+    with pytest.raises(UserError, match=r"track\.alignment_1 -> wheelset\.xi.*--master jacobi"):
+        run(track_wheelset(fmu_dir, factor=2.0), "container", progress=False)
+
+
+def test_container_reports_a_bad_parameter(fmu_dir):
+    with pytest.raises(UserError, match="psd_level = 7"):
+        run(track_wheelset(fmu_dir, track={"psd_level": 7}), "container", progress=False)
+
+
+def test_gauss_seidel_exact_where_nothing_is_coupled(fmu_dir, results):
+    gs, jac = results["gauss-seidel"], results["jacobi"]
+    assert gs.notes[0] == "Gauss-Seidel order: track -> wheelset"
+    track_cols = [i for i, c in enumerate(jac.columns) if c == "time" or c.startswith("track.")]
+    np.testing.assert_array_equal(gs.data[:, track_cols], jac.data[:, track_cols])
+    # the sample holds the input from the source at t, as for Jacobi
+    xi = run(track_wheelset(fmu_dir, record=["track.alignment_1", "wheelset.xi"]), "gauss-seidel", progress=False)
+    np.testing.assert_array_equal(col(xi, "wheelset.xi"), col(xi, "track.alignment_1"))
+    # no connections at all: the same calls in another order
+    loose = track_wheelset(fmu_dir)
+    loose.connections = []
+    loose.components[1].parameters = {"y": 1e-3}
+    np.testing.assert_array_equal(run(loose, "gauss-seidel", progress=False).data,
+                                  run(loose, "jacobi", progress=False).data)
+
+
+def test_gauss_seidel_converges_to_jacobi_with_h(fmu_dir):
+    diffs = []
+    for h in (1e-3, 5e-4, 2.5e-4):
+        system = track_wheelset(fmu_dir, step_size=h, record=["wheelset.y"])
+        gs, jac = run(system, "gauss-seidel", progress=False), run(system, "jacobi", progress=False)
+        d = np.abs(col(gs, "wheelset.y") - col(jac, "wheelset.y")).max()
+        assert d > 0
+        diffs.append(d)
+    y_range = np.ptp(col(jac, "wheelset.y"))
+    assert diffs[0] < 0.01 * y_range  # O(h): ~0.4 % of the range at 1 ms
+    for coarse, fine in itertools.pairwise(diffs):
+        assert coarse / fine == pytest.approx(2.0, abs=0.3)
+
+
+@pytest.mark.parametrize("master", ["jacobi", "gauss-seidel"])
+def test_factor_two_doubles_the_response(fmu_dir, master):
+    rec = ["track.alignment_1", "wheelset.xi", "wheelset.y"]
+    one = run(track_wheelset(fmu_dir, track=STEP, stop_time=4.0, record=rec), master, progress=False)
+    two = run(track_wheelset(fmu_dir, track=STEP, factor=2.0, stop_time=4.0, record=rec), master, progress=False)
+    np.testing.assert_array_equal(col(two, "track.alignment_1"), col(one, "track.alignment_1"))
+    np.testing.assert_array_equal(col(two, "wheelset.xi"), 2 * col(one, "track.alignment_1"))
+    y1, y2 = col(one, "wheelset.y"), col(two, "wheelset.y")
+    np.testing.assert_allclose(y2, 2 * y1, rtol=0, atol=1e-12 * np.abs(y1).max())
+    assert y2[-1] == pytest.approx(2e-3, rel=0.05)  # follows the doubled 1 mm step
+
+
+def two_wheelsets(fmu_dir, out_var):
+    ws = fmu_dir / "WheelsetLateral.fmu"
+    return System("pair", [Component("a", ws, {"y": 1e-3}), Component("b", ws, {})],
+                  [Connection("a", out_var, "b", "xi"), Connection("b", out_var, "a", "xi")],
+                  stop_time=0.1)
+
+
+def test_algebraic_loop_is_refused(fmu_dir):
+    md = read_model_description(str(fmu_dir / "WheelsetLateral.fmu"))
+    ddy = next(o for o in md.outputs if o.variable.name == "ddy")
+    assert [d.name for d in ddy.dependencies] == ["xi"]  # direct feedthrough, per ModelStructure
+    system = two_wheelsets(fmu_dir, "ddy")
+    msg = r"algebraic loop: a\.ddy -> b\.xi, b\.ddy -> a\.xi; Gauss-Seidel does not iterate"
+    with pytest.raises(UserError, match=msg):
+        gauss_seidel_order(system, {"a": md, "b": md})
+    with pytest.raises(UserError, match=msg):
+        run(system, "gauss-seidel", progress=False)
+
+
+def test_cycle_without_feedthrough_is_broken(fmu_dir):
+    system = two_wheelsets(fmu_dir, "y")
+    md = read_model_description(str(fmu_dir / "WheelsetLateral.fmu"))
+    order, delayed = gauss_seidel_order(system, {"a": md, "b": md})
+    assert order == ["a", "b"] and [str(c) for c in delayed] == ["b.y -> a.xi"]
+    res = run(system, "gauss-seidel", progress=False)
+    assert any("delayed connection b.y -> a.xi" in n for n in res.notes)
+    # b's input is a's y at t (the consistent sample), a's input b's y at t
+    np.testing.assert_array_equal(col(res, "b.y")[1:] != 0, np.ones(100, bool))
+
+
+def test_csv_recorder_and_array_recorder(fmu_dir, tmp_path, results):
+    system = track_wheelset(fmu_dir)
+    csv_sink, mem = CsvRecorder(tmp_path / "signals.csv"), ArrayRecorder()
+    res = run(system, "jacobi", sinks=[csv_sink, mem], progress=False)
+    with open(tmp_path / "signals.csv", newline="") as f:
+        rows = list(csv.reader(f))
+    assert rows[0] == res.columns
+    assert len(rows) - 1 == csv_sink.rows_written == system.n_steps + 1
+    assert csv_sink.last_time == 2.0 and csv_sink.complete is True
+    np.testing.assert_array_equal(np.array(rows[1:], dtype=float), res.data)  # repr round-trips
+    assert mem.complete is True
+    np.testing.assert_array_equal(mem.data, res.data)
+    # the container hands blocks to the same sinks
+    mem2 = ArrayRecorder()
+    run(system, "container", sinks=[mem2], progress=False)
+    np.testing.assert_array_equal(mem2.data, res.data)
+
+
+@pytest.mark.parametrize("master", ["jacobi", "gauss-seidel"])
+def test_non_finite_stops_the_run_and_keeps_the_csv(fmu_dir, tmp_path, master):
+    # xi = 1e308 * (1 mm step at t = 1 s): finite, but ddy = D xi overflows
+    system = track_wheelset(fmu_dir, track={"psd_level": 0, "step_lateral": 1e-3, "step_position": 20.0})
+    system.connections = [Connection("track", "alignment_1", "wheelset", "xi", factor=1e308)]
+    sink, mem = CsvRecorder(tmp_path / "signals.csv"), ArrayRecorder()
+    with pytest.raises(UserError, match=r"wheelset|WheelsetLateral") as err:
+        run(system, master, sinks=[sink, mem], progress=False)
+    if master == "jacobi":
+        assert str(err.value).startswith("wheelset.ddy = inf at t = 1 s: a non-finite value left an FMU")
+    assert sink.complete is False and mem.complete is False
+    with open(tmp_path / "signals.csv", newline="") as f:
+        rows = list(csv.reader(f))
+    data = np.array(rows[1:], dtype=float)
+    assert len(data) == sink.rows_written == mem.rows == 1000
+    assert sink.last_time == data[-1, 0] == 0.999
+    assert np.isfinite(data).all()
+
+
+def test_nan_offset_is_refused_by_the_fmu(fmu_dir):
+    system = track_wheelset(fmu_dir)
+    system.connections[0].offset = math.nan
+    with pytest.raises(UserError, match=r"wheelset.*track\.alignment_1 -> wheelset\.xi.*not finite"):
+        run(system, "jacobi", progress=False)
+
+
+class Interrupting(ArrayRecorder):
+    """A sink whose user presses Ctrl-C once the run passes t = 0.5 s."""
+
+    def write(self, row):
+        if row[0] >= 0.5:
+            raise KeyboardInterrupt
+        super().write(row)
+
+    def write_block(self, rows):
+        if rows[-1, 0] >= 0.5:
+            raise KeyboardInterrupt
+        super().write_block(rows)
+
+
+@pytest.mark.parametrize("master", MASTERS)
+def test_interrupt_closes_sinks_incomplete(fmu_dir, tmp_path, master):
+    stop, sink = Interrupting(), CsvRecorder(tmp_path / "signals.csv")
+    with pytest.raises(KeyboardInterrupt):
+        run(track_wheelset(fmu_dir), master, sinks=[sink, stop], progress=False)
+    assert stop.complete is False and sink.complete is False
+    with open(tmp_path / "signals.csv", newline="") as f:
+        rows = list(csv.reader(f))
+    assert 0 < len(rows) - 1 == sink.rows_written < 2001
+
+
+def test_step_size_must_divide(fmu_dir):
+    for master in MASTERS:
+        with pytest.raises(UserError, match="does not divide"):
+            run(track_wheelset(fmu_dir, step_size=0.3), master, progress=False)
+
+
+def test_unknown_master(fmu_dir):
+    with pytest.raises(UserError, match="unknown master"):
+        run(track_wheelset(fmu_dir), "newton")
