@@ -178,16 +178,19 @@ class Model:
         out.update({o.name: float(v) for o, v in zip(self.outputs, vals)})
         return out
 
-    def linearize(self, p: Mapping[str, float] | None = None):
-        """(A, B, C, D) of dx = A x + B u, y = C x + D u about x = 0, u = 0, with the given
-        parameters; B and D columns follow ``self.inputs``, C and D rows ``self.outputs``."""
+    def linearize(self, p: Mapping[str, float] | None = None, u0: Mapping[str, float] | None = None):
+        """(A, B, C, D) of dx = A x + B du, y = C x + D du about x = 0 and the inputs at their
+        start values (overridden by ``u0``; an input such as a stiffness is an operating
+        point, not a small signal), with the given parameters; B and D columns follow
+        ``self.inputs``, C and D rows ``self.outputs``."""
         x = [s.symbol for s in self.states]
         u = [v.symbol for v in self.inputs]
         f = sp.Matrix(self.derivative_exprs())
         g = sp.Matrix([o.expr for o in self.outputs])
         pv = {**self.default_parameters(), **(p or {})}
         subs = {q.symbol: pv[q.name] for q in self.parameters}
-        zero = {s: 0 for s in [*x, *u]}
+        uv = {**{v.name: v.start for v in self.inputs}, **(u0 or {})}
+        zero = {**{s: 0 for s in x}, **{v.symbol: uv[v.name] for v in self.inputs}}
 
         def num(m):
             return np.array(m.subs(subs).subs(zero), dtype=float)
