@@ -7,23 +7,12 @@ code 2; no traceback.
 from __future__ import annotations
 
 import argparse
-import importlib
-import json
-import math
 import sys
 import time
 from pathlib import Path
 
 from fmus.build import BuildError
 from fmus.errors import UserError
-
-EXPERIMENTS = ["track_wheelset"]
-
-
-def _experiment(name: str):
-    if name not in EXPERIMENTS:
-        raise UserError(f"unknown experiment {name!r}; known: {', '.join(EXPERIMENTS)}")
-    return importlib.import_module(f"experiments.{name}")
 
 
 def cmd_build(args) -> int:
@@ -41,19 +30,28 @@ def cmd_build(args) -> int:
 
 
 def cmd_validate(args) -> int:
-    from fmus.build import validate
+    from fmus.build import DEFAULT_OUT, build_all, validate
+    from fmus.ssp import validate_ssp
 
     path = Path(args.path)
     if not path.exists():
         raise UserError(f"{path}: no such file or directory")
-    targets = sorted(path.glob("*.fmu")) if path.is_dir() else [path]
-    if not targets:
-        raise UserError(f"{path}: no .fmu files in this folder")
+    if path.is_dir() and not (path / "SystemStructure.ssd").is_file():
+        targets = sorted(path.glob("*.fmu")) + sorted(path.glob("*.ssp"))
+        if not targets:
+            raise UserError(f"{path}: no .fmu, .ssp or SystemStructure.ssd in this folder")
+    else:
+        targets = [path]
     bad = 0
     for t in targets:
-        if t.suffix != ".fmu":
-            raise UserError(f"{t}: not an FMU (.ssp validation comes with the SSP reader)")
-        problems = validate(t)
+        if t.suffix == ".fmu":
+            problems = validate(t)
+        elif t.suffix in (".ssp", ".ssd") or t.is_dir():
+            if t.suffix != ".ssp":  # an experiment folder: its FMUs come from the build
+                build_all(DEFAULT_OUT)
+            problems = validate_ssp(t, fmu_dirs=[DEFAULT_OUT])
+        else:
+            raise UserError(f"{t}: not an FMU or SSP (.fmu, .ssp, .ssd or a folder)")
         bad += bool(problems)
         print(f"{t}: {'OK' if not problems else f'{len(problems)} problems'}")
         for pr in problems:
@@ -62,132 +60,110 @@ def cmd_validate(args) -> int:
 
 
 def cmd_list(args) -> int:
-    for name in EXPERIMENTS:
-        exp = _experiment(name)
-        print(f"{name}: {exp.DESCRIPTION}")
-        for v in exp.VARIANTS:
-            print(f"  {v}{' (default)' if v == exp.DEFAULT_VARIANT else ''}")
+    from .runner import experiment_names, find_experiment
+
+    for name in experiment_names():
+        exp = find_experiment(name)
+        print(f"{name}: {exp.description}")
+        for v in exp.variants:
+            print(f"  {v}{' (default)' if v == exp.default_variant else ''}")
     return 0
 
 
-def _parse_set(items: list[str]) -> dict[str, dict[str, float | str]]:
-    out: dict[str, dict[str, float | str]] = {}
+def _parse_set(items: list[str]) -> dict[str, dict[str, str]]:
+    out: dict[str, dict[str, str]] = {}
     for item in items:
         key, sep, value = item.partition("=")
         comp, dot, param = key.partition(".")
         if not sep or not dot or not comp or not param or not value:
             raise UserError(f"--set {item!r}: expected COMPONENT.PARAM=VALUE")
-        try:
-            parsed: float | str = float(value)
-        except ValueError:
-            parsed = value
-        out.setdefault(comp, {})[param] = parsed
+        out.setdefault(comp, {})[param] = value  # text: converted to the variable's FMI type by the reader
     return out
 
 
-def cmd_run(args) -> int:
-    from fmus.build import DEFAULT_OUT, build_all
-    from fmus.cosim import simulate
+def _overrides(args) -> dict:
+    return {"sets": _parse_set(args.set or []), "seed": args.seed, "stop_time": args.stop_time,
+            "step_size": args.step_size}
 
-    exp = _experiment(args.experiment)
-    variant = args.variant or exp.DEFAULT_VARIANT
-    if variant not in exp.VARIANTS:
-        raise UserError(f"experiment {args.experiment}: unknown variant {variant!r}; "
-                        f"known: {', '.join(exp.VARIANTS)}")
-    build_all(DEFAULT_OUT)
-    components, connections, record = exp.system(DEFAULT_OUT, variant)
-    by_name = {c.name: c for c in components}
-    for comp, params in _parse_set(args.set or []).items():
-        if comp not in by_name:
-            raise UserError(f"--set: unknown component {comp!r}; components: {', '.join(by_name)}")
-        by_name[comp].parameters.update(params)
-    if args.seed is not None:
-        by_name["track"].parameters["seed"] = args.seed
-    stop = exp.STOP_TIME if args.stop_time is None else args.stop_time
-    step = exp.STEP_SIZE if args.step_size is None else args.step_size
-    for flag, value in (("--stop-time", stop), ("--step-size", step)):
-        if not (value > 0 and math.isfinite(value)):
-            raise UserError(f"{flag} {value:g}: must be a positive number of seconds")
-    out = Path(args.out or f"out/{args.experiment}/{variant}")
-    out.mkdir(parents=True, exist_ok=True)
-    print(f"running {args.experiment}/{variant}: {stop:g} s at {step:g} s -> {out}", file=sys.stderr)
-    t0 = time.monotonic()
-    data = simulate(components, connections, stop, step, out_csv=out / "signals.csv", record=record)
-    wall = time.monotonic() - t0
-    metrics = {"experiment": args.experiment, "variant": variant, "stop_time_s": stop, "step_size_s": step,
-               "wall_time_s": wall, "realtime_factor": stop / wall,
-               "rms": {k: math.sqrt(sum(x * x for x in v) / len(v)) for k, v in data.items() if k != "time"}}
-    (out / "metrics.json").write_text(json.dumps(metrics, indent=2) + "\n")
-    _plot(exp, data, out)
-    lines = [f"# {args.experiment} / {variant}", "", exp.DESCRIPTION, "",
-             f"{stop:g} s at a {step:g} s communication step, Jacobi master, {wall:.2f} s wall time.", "",
-             "| signal | rms |", "|---|---|"]
-    lines += [f"| {k} | {v:.4g} |" for k, v in metrics["rms"].items()]
-    lines += ["", *[f"![{f}]({f})" for f in exp.PLOTS]]
-    (out / "report.md").write_text("\n".join(lines) + "\n")
-    print(f"wrote {out}/signals.csv, metrics.json, report.md, {', '.join(exp.PLOTS)}")
+
+def cmd_run(args) -> int:
+    from .runner import run_experiment
+
+    run_experiment(args.experiment, args.variant, args.out, master=args.master, **_overrides(args))
     return 0
 
 
-def _plot(exp, data, out: Path) -> None:
-    import matplotlib
+def cmd_study(args) -> int:
+    from .study import run_study
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    for fname, (title, axes_spec) in exp.PLOTS.items():
-        fig, axes = plt.subplots(len(axes_spec), 1, figsize=(9, 2.4 * len(axes_spec)), sharex=True,
-                                 squeeze=False)
-        for ax, signals in zip(axes[:, 0], axes_spec):
-            for sig, label in signals:
-                ax.plot(data["time"], data[sig], lw=0.8, label=label)
-            if len(signals) > 1:
-                ax.legend(fontsize=8, loc="upper right")
-                ax.set_ylabel(f"[{_unit(sig)}]", fontsize=8)
-            else:
-                ax.set_ylabel(signals[0][1], fontsize=8)
-            ax.grid(alpha=0.3)
-        axes[0, 0].set_title(title)
-        axes[-1, 0].set_xlabel("time [s]")
-        fig.tight_layout()
-        fig.savefig(out / fname, dpi=110)
-        plt.close(fig)
+    run_study(args.experiment, args.out, scheduler=args.scheduler, master=args.master,
+              workers=args.workers, **_overrides(args))
+    return 0
 
 
-def _unit(signal: str) -> str:
-    """Unit of 'component.variable' from the model definitions (for axis labels)."""
-    from models import all_models
+def cmd_export(args) -> int:
+    from fmus.ssp import write_ssp
 
-    var = signal.split(".", 1)[1]
-    for model in all_models():
-        try:
-            return model.variable(var).unit or "-"
-        except KeyError:
-            continue
-    return "?"
+    from .runner import find_experiment, load_system
+
+    exp = find_experiment(args.experiment)
+    system = load_system(exp, args.variant or exp.default_variant, **_overrides(args))
+    out = Path(args.output)
+    if out.suffix != ".ssp":
+        raise UserError(f"-o {out}: the archive name must end in .ssp")
+    write_ssp(system, out)
+    print(f"wrote {out} ({exp.name}/{args.variant or exp.default_variant}, "
+          f"{len(system.components)} FMUs inside)")
+    return 0
+
+
+def _add_overrides(p) -> None:
+    p.add_argument("--set", action="append", metavar="COMPONENT.PARAM=VALUE",
+                   help="override a parameter (repeatable)")
+    p.add_argument("--seed", type=int, help="seed of every random source (track, sensor noise)")
+    p.add_argument("--stop-time", type=float, help="override the SSD's DefaultExperiment stop time [s]")
+    p.add_argument("--step-size", type=float, help="override the communication step [s]")
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message):  # one line and exit 2, like every other user error
+        print(f"railfmu: error: {self.prog}: {message}", file=sys.stderr)
+        sys.exit(2)
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="railfmu", description=__doc__.splitlines()[0])
+    ap = _Parser(prog="railfmu", description=__doc__.splitlines()[0])
     sub = ap.add_subparsers(dest="command", required=True)
     p = sub.add_parser("build", help="compile all FMUs")
     p.add_argument("--out", default=None, help="output folder (default build/fmus)")
     p.add_argument("--force", action="store_true", help="rebuild even if unchanged")
     p.set_defaults(fn=cmd_build)
-    p = sub.add_parser("validate", help="validate an FMU (or every FMU in a folder)")
+    p = sub.add_parser("validate", help="validate an FMU, an SSP (.ssp, .ssd, folder) or every FMU/SSP in a folder")
     p.add_argument("path")
     p.set_defaults(fn=cmd_validate)
     p = sub.add_parser("list", help="experiments and their variants")
     p.set_defaults(fn=cmd_list)
-    p = sub.add_parser("run", help="run one experiment")
+    p = sub.add_parser("run", help="run one experiment (a name from `list`, or the path of an SSP)")
     p.add_argument("experiment")
     p.add_argument("--variant")
-    p.add_argument("--out")
-    p.add_argument("--set", action="append", metavar="COMPONENT.PARAM=VALUE")
-    p.add_argument("--seed", type=int)
-    p.add_argument("--stop-time", type=float)
-    p.add_argument("--step-size", type=float)
+    p.add_argument("--out", help="output folder (default out/EXP/VARIANT)")
+    p.add_argument("--master", default="jacobi", help="jacobi (default), gauss-seidel or container")
+    _add_overrides(p)
     p.set_defaults(fn=cmd_run)
+    p = sub.add_parser("study", help="every variant of an experiment, in parallel (Dask) -> table")
+    p.add_argument("experiment")
+    p.add_argument("--out", help="output folder (default out/EXP_study)")
+    p.add_argument("--scheduler", help="address of a running Dask scheduler (default: a local cluster)")
+    p.add_argument("--workers", type=int, help="local cluster size (default: min(variants, 2))")
+    p.add_argument("--master", default="jacobi", help="jacobi (default), gauss-seidel or container")
+    _add_overrides(p)
+    p.set_defaults(fn=cmd_study)
+    p = sub.add_parser("export", help="a self-contained .ssp (SSD + parameters + FMUs) of one variant")
+    p.add_argument("experiment")
+    p.add_argument("--variant")
+    p.add_argument("-o", "--output", required=True, metavar="FILE.ssp")
+    _add_overrides(p)
+    p.set_defaults(fn=cmd_export)
     args = ap.parse_args(argv)
     if args.command == "build" and args.out is None:
         from fmus.build import DEFAULT_OUT
@@ -202,7 +178,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"railfmu: build failed: {exc}", file=sys.stderr)
         return 1
     except KeyboardInterrupt:
-        print("railfmu: interrupted (partial results stay in the output folder)", file=sys.stderr)
+        print("railfmu: interrupted (complete rows written so far stay in the output folder)",
+              file=sys.stderr)
         return 130
 
 

@@ -7,8 +7,7 @@ Three masters, one time grid ``t_k = start + k h`` (k = 0 .. n), one sample per 
     At every t_k: copy every connection (``dst = factor * src + offset``, in the order of
     ``system.connections``), sample, then step every FMU from t_k to t_k+1. Every FMU sees
     its inputs as the sources' outputs at the start of the step. This is the coupling of
-    :func:`fmus.cosim.simulate` (bit-identical samples), of libcosim's fixed-step algorithm
-    and of FMPy's container FMU.
+    libcosim's fixed-step algorithm and of FMPy's container FMU.
 
 ``gauss-seidel``
     Components step one after the other in the order of the connection graph (sources

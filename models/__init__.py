@@ -10,11 +10,12 @@ from .base import Input, Model, Output, Parameter, State, Variable
 def all_models() -> list[Model]:
     """Every model that is built into an FMU, in build order."""
     from .coach_vertical import COACH_VERTICAL
+    from .sensors import SENSORS
     from .step_source import STEP_SOURCE
     from .track import TRACK
     from .wheelset import WHEELSET
 
-    return [TRACK, WHEELSET, COACH_VERTICAL, STEP_SOURCE]
+    return [TRACK, WHEELSET, COACH_VERTICAL, STEP_SOURCE, SENSORS]
 
 
 __all__ = ["Input", "Model", "Output", "Parameter", "State", "Variable", "all_models"]

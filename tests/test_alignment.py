@@ -10,26 +10,12 @@ import pytest
 from scipy.signal import butter, sosfiltfilt
 
 from estimators.alignment import AlignmentKalmanFilter
-from fmus.cosim import Component, Connection, simulate
+from helpers import track_wheelset_signals
 from models.wheelset import WHEELSET
 
 DT = 1e-3
 V = 20.0
 SENSORS = ("ddy", "dpsi", "ddy_f")
-
-
-def track_wheelset_signals(fmu_dir, track_params, stop_time):
-    """TrackIrregularity -> WheelsetLateral through the Jacobi master; returns (t, Z, xi_true)
-    with Z the columns ddy, dpsi, ddy_f. (The one place to switch to fmus.masters.run.)"""
-    data = simulate(
-        [Component("track", fmu_dir / "TrackIrregularity.fmu", track_params),
-         Component("wheelset", fmu_dir / "WheelsetLateral.fmu")],
-        [Connection("track", "alignment_1", "wheelset", "xi"),
-         Connection("track", "alignment_rate_1", "wheelset", "xi_rate")],
-        stop_time=stop_time, step_size=DT, progress=False,
-        record=[("track", "alignment_1"), *(("wheelset", s) for s in SENSORS)])
-    Z = np.column_stack([data[f"wheelset.{s}"] for s in SENSORS])
-    return np.asarray(data["time"]), Z, np.asarray(data["track.alignment_1"])
 
 
 def rms(x):

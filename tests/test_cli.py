@@ -1,11 +1,16 @@
-"""The railfmu command line: the main job's outputs, and one-line errors with exit code 2."""
+"""The railfmu command line: the main job's outputs through every master, and one-line errors
+with exit code 2 for every kind of bad input (DESIGN.md "Command line")."""
 
 import csv
 import json
+import shutil
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
+
+EXPERIMENT = Path(__file__).resolve().parents[1] / "experiments" / "track_wheelset"
 
 
 def railfmu(*args, cwd=None):
@@ -13,40 +18,137 @@ def railfmu(*args, cwd=None):
                           text=True, cwd=cwd)
 
 
-def test_run_writes_signals_metrics_report_and_plots(tmp_path):
+@pytest.mark.parametrize("master", ["jacobi", "gauss-seidel", "container"])
+def test_run_writes_signals_estimates_metrics_report_and_plots(tmp_path, master):
     out = tmp_path / "run"
     res = railfmu("run", "track_wheelset", "--variant", "harmonic", "--stop-time", "2",
-                  "--out", str(out))
+                  "--master", master, "--out", str(out))
     assert res.returncode == 0, res.stderr
-    for f in ("signals.csv", "metrics.json", "report.md", "track_input.png", "sensors.png"):
+    for f in ("signals.csv", "estimates.csv", "metrics.json", "report.md", "track_input.png", "sensors.png",
+              "estimates_alignment.png"):
         assert (out / f).is_file(), f
     rows = list(csv.DictReader(open(out / "signals.csv")))
     assert len(rows) == 2001 and float(rows[-1]["time"]) == pytest.approx(2.0)
+    est = list(csv.DictReader(open(out / "estimates.csv")))
+    assert len(est) == 2001 and "alignment.xi" in est[0]
     metrics = json.loads((out / "metrics.json").read_text())
+    assert metrics["master"] == master
     # 1 mm harmonic alignment: rms 1/sqrt(2) mm under the leading wheelset
     assert metrics["rms"]["track.alignment_1"] == pytest.approx(1e-3 / 2**0.5, rel=0.01)
+    assert metrics["observers"]["alignment"]["xi"]["rel_error"] < 0.5
+
+
+def test_container_master_matches_jacobi_through_the_cli(tmp_path):
+    data = {}
+    for master in ("jacobi", "container"):
+        res = railfmu("run", "track_wheelset", "--stop-time", "1", "--master", master, "--out", str(tmp_path / master))
+        assert res.returncode == 0, res.stderr
+        data[master] = list(csv.reader(open(tmp_path / master / "signals.csv")))
+    assert data["jacobi"] == data["container"]  # same header, same repr() of every sample
+
+
+def test_list_shows_experiments_and_variants():
+    res = railfmu("list")
+    assert res.returncode == 0
+    assert "track_wheelset" in res.stdout and "psd (default)" in res.stdout and "harmonic" in res.stdout
+
+
+def test_export_writes_a_valid_self_contained_ssp(tmp_path):
+    ssp = tmp_path / "tw.ssp"
+    res = railfmu("export", "track_wheelset", "--variant", "harmonic", "-o", str(ssp))
+    assert res.returncode == 0, res.stderr
+    res = railfmu("validate", str(ssp))
+    assert res.returncode == 0, res.stdout + res.stderr
+    # runnable by path, away from the repository's build folder
+    res = railfmu("run", str(ssp), "--stop-time", "0.5", "--out", str(tmp_path / "run"), cwd=tmp_path)
+    assert res.returncode == 0, res.stderr
+
+
+def test_study_runs_every_variant_through_dask(tmp_path):
+    out = tmp_path / "study"
+    res = railfmu("study", "track_wheelset", "--stop-time", "1", "--out", str(out))
+    assert res.returncode == 0, res.stderr
+    table = json.loads((out / "table.json").read_text())
+    assert sorted(table) == ["harmonic", "psd"]
+    assert table["harmonic"]["rms"]["track.alignment_1"] == pytest.approx(1e-3 / 2**0.5, rel=0.02)
+    assert "| harmonic |" in (out / "table.md").read_text()
+    assert (out / "psd" / "signals.csv").is_file()
+
+
+def _broken_experiment(tmp_path, old: str, new: str, file: str = "SystemStructure.ssd") -> Path:
+    """A copy of the track_wheelset experiment with one edit, FMUs taken from the build folder."""
+    exp = tmp_path / "exp"
+    shutil.copytree(EXPERIMENT, exp, ignore=shutil.ignore_patterns("*.py", "__pycache__"))
+    text = (exp / file).read_text()
+    assert old in text, old
+    (exp / file).write_text(text.replace(old, new, 1))
+    return exp
+
+
+SSD_EDITS = [  # (old, new, file, expected message part)
+    ('<ssd:System name="track_wheelset">', '<ssd:System name="track_wheelset"', "SystemStructure.ssd",
+     "malformed XML"),
+    ('endConnector="xi"/>', "/>", "SystemStructure.ssd", "endConnector"),
+    ("resources/WheelsetLateral.fmu", "resources/NoSuchModel.fmu", "SystemStructure.ssd", "NoSuchModel.fmu"),
+    ('endElement="wheelset" endConnector="xi"', 'endElement="bogie" endConnector="xi"', "SystemStructure.ssd",
+     "bogie"),
+    ('startConnector="alignment_1"', 'startConnector="alignment_9"', "SystemStructure.ssd", "alignment_9"),
+    ('<ssd:Connector name="xi" kind="input"><ssc:Real unit="m"/>',
+     '<ssd:Connector name="xi" kind="input"><ssc:Integer/>', "SystemStructure.ssd", "xi"),
+    ('startConnector="alignment_rate_1"', 'startConnector="alignment_1"', "SystemStructure.ssd", "unit"),
+    ('name="track.psd_level"', 'name="track.psd_levels"', "variants/psd.ssv", "psd_levels"),
+    ('stepSize="0.001"', 'stepSize="0.3"', "SystemStructure.ssd", "does not divide"),
+    ('startConnector="alignment_1" endElement="wheelset" endConnector="xi"/>',
+     'startConnector="alignment_1" endElement="wheelset" endConnector="xi">'
+     '<ssc:LinearTransformation factor="1e308"/></ssd:Connection>', "SystemStructure.ssd",
+     "a non-finite value left an FMU"),
+]
+
+
+@pytest.mark.parametrize("old, new, file, message", SSD_EDITS, ids=[
+    "malformed-xml", "schema", "missing-fmu", "unknown-component", "unknown-connector", "type-mismatch",
+    "unit-mismatch", "unknown-parameter-in-variant", "step-size", "nan-from-fmu"])
+def test_bad_ssp_is_one_line_and_exit_2(tmp_path, old, new, file, message):
+    exp = _broken_experiment(tmp_path, old, new, file)
+    res = railfmu("run", str(exp), "--variant", "psd", "--stop-time", "1", "--out", str(tmp_path / "out"))
+    _assert_one_line_error(res, message)
 
 
 @pytest.mark.parametrize("args, message", [
     (["run", "no_such_experiment"], "unknown experiment 'no_such_experiment'"),
     (["run", "track_wheelset", "--variant", "nope"], "unknown variant 'nope'"),
+    (["run", "track_wheelset", "--master", "newton"], "--master 'newton'"),
     (["run", "track_wheelset", "--set", "wheelset.m"], "expected COMPONENT.PARAM=VALUE"),
-    (["run", "track_wheelset", "--set", "bogie.m=1"], "unknown component 'bogie'"),
-    (["run", "track_wheelset", "--set", "wheelset.mass=1"], "no variable 'mass'"),
+    (["run", "track_wheelset", "--set", "bogie.m=1"], "bogie"),
+    (["run", "track_wheelset", "--set", "wheelset.mass=1"], "mass"),
     (["run", "track_wheelset", "--set", "wheelset.m=-1"], "parameter m = -1 must be > 0"),
     (["run", "track_wheelset", "--set", "track.profile_file=/nonexistent/p.csv"], "p.csv: cannot open"),
     (["run", "track_wheelset", "--stop-time", "1", "--step-size", "0.3"], "does not divide"),
     (["run", "track_wheelset", "--stop-time", "0"], "--stop-time 0: must be a positive"),
     (["run", "track_wheelset", "--step-size", "nan"], "--step-size nan: must be a positive"),
+    (["run", "track_wheelset", "--seed", "many"], "invalid int value"),
     (["validate", "/nonexistent.fmu"], "no such file"),
 ])
-def test_bad_input_is_one_line_and_exit_2(tmp_path, args, message):
+def test_bad_command_line_is_one_line_and_exit_2(tmp_path, args, message):
     res = railfmu(*args, "--out", str(tmp_path)) if args[0] == "run" else railfmu(*args)
-    assert res.returncode == 2, res.stderr
-    lines = res.stderr.strip().splitlines()
-    assert message in lines[-1]
+    _assert_one_line_error(res, message)
+
+
+def test_an_ssp_that_is_not_a_zip_is_one_line_and_exit_2(tmp_path):
+    bad = tmp_path / "bad.ssp"
+    bad.write_bytes(b"not a zip")
+    _assert_one_line_error(railfmu("run", str(bad), "--out", str(tmp_path / "out")), "bad.ssp")
+
+
+def _assert_one_line_error(res, message):
+    assert res.returncode == 2, res.stdout + res.stderr
     assert "Traceback" not in res.stderr
-    assert all(line.startswith(("railfmu: error:", "running ")) for line in lines), res.stderr
+    errors = [line for line in res.stderr.strip().splitlines() if line.startswith("railfmu: error:")]
+    assert len(errors) == 1, res.stderr
+    assert message in errors[0], errors[0]
+    others = [line for line in res.stderr.strip().splitlines()
+              if not line.startswith(("railfmu: error:", "railfmu: warning:", "running "))]
+    assert not others, res.stderr
 
 
 def test_validate_reports_problems_of_a_broken_fmu(tmp_path):

@@ -11,7 +11,7 @@ How libcosim's fixed-step algorithm (libcosim 0.11, ``fixed_step_algorithm.cpp``
    next step.
 
 So it is a Jacobi scheme: the input used over [t_k, t_k+1] is the source's output at t_k,
-the same as our :func:`fmus.cosim.simulate`. Time is an integer number of nanoseconds; an
+the same as our Jacobi master (:mod:`fmus.masters`). Time is an integer number of nanoseconds; an
 FMU sees ``t_k = k * h_ns / 1e9`` and the step ``t_k+1 - t_k`` (both as doubles), which
 differ from FMPy's ``k * h`` and ``h`` by an ulp now and then.
 
@@ -62,7 +62,8 @@ from libcosimpy.CosimLogging import CosimLogLevel, log_output_level  # noqa: E40
 from libcosimpy.CosimObserver import CosimObserver  # noqa: E402
 from libcosimpy.CosimSlave import CosimLocalSlave  # noqa: E402
 
-from fmus.cosim import Component, Connection, simulate  # noqa: E402
+from fmus.masters import run as run_master  # noqa: E402
+from fmus.system import Component, Connection, System  # noqa: E402
 from fmus.slave import Slave  # noqa: E402
 from models.wheelset import WHEELSET  # noqa: E402
 
@@ -184,10 +185,12 @@ def test_track_to_wheelset_matches_our_jacobi_master(fmu_dir):
     run.run(N_STEPS)
     cosim = {f"{c}.{v}": run.samples(c, v, N_STEPS) for c, v in recorded}
 
-    ref = simulate([Component("track", track, TRACK_PARAMETERS),
-                    Component("wheelset", wheelset, WHEELSET_PARAMETERS)],
-                   [Connection(*link) for link in links], stop_time=N_STEPS * STEP_NS / 1e9,
-                   step_size=STEP_NS / 1e9, record=recorded, progress=False)
+    system = System("track_wheelset", [Component("track", track, TRACK_PARAMETERS),
+                                       Component("wheelset", wheelset, WHEELSET_PARAMETERS)],
+                    [Connection(*link) for link in links], stop_time=N_STEPS * STEP_NS / 1e9,
+                    step_size=STEP_NS / 1e9, record=[f"{c}.{v}" for c, v in recorded])
+    result = run_master(system, "jacobi", progress=False)
+    ref = {c: result.data[:, j] for j, c in enumerate(result.columns)}
 
     # the wheelset moves (released from 1 mm, driven by the track) and both runs agree
     assert ref["wheelset.y"][0] == pytest.approx(1e-3, rel=1e-15)
@@ -215,3 +218,76 @@ def test_track_to_wheelset_matches_our_jacobi_master(fmu_dir):
     xi_cosim, align = cosim["wheelset.xi"], cosim["track.alignment_1"]
     assert relative_deviation(xi_cosim[1:], align[:-1]) <= RTOL
     assert relative_deviation(ref["wheelset.xi"], ref["track.alignment_1"]) == 0.0
+
+
+# -- tool-chain exchange: the archive `railfmu export` writes runs in libcosim as it is -------
+
+def _feedthrough(md) -> set[str]:
+    """Outputs that depend directly on an input (no dependency list: depends on everything)."""
+    inputs = {v.name for v in md.modelVariables if v.causality == "input"}
+    out = set()
+    for o in md.outputs:
+        deps = o.dependencies
+        if deps is None or any(d.name in inputs for d in deps):
+            out.add(o.variable.name)
+    return out
+
+
+def _exchange_cases():
+    from experiments.runner import experiment_names, find_experiment
+
+    return [(name, v) for name in experiment_names() for v in find_experiment(name).variants]
+
+
+@pytest.mark.parametrize("experiment, variant", _exchange_cases())
+def test_exported_ssp_runs_in_libcosim_like_our_jacobi_master(tmp_path, experiment, variant):
+    """`railfmu export` -> .ssp -> libcosim's own SSP loader (from_ssp_file: it applies the
+    inline .ssv bindings and reads the OSP step annotation) -> same trajectories as our Jacobi
+    master on the same archive, for every recorded signal that does not feed through an
+    input (those are sampled on the other side of the transfer: see the module docstring)."""
+    import subprocess
+    import sys
+
+    from fmus.ssp import read_system
+
+    ssp = tmp_path / f"{experiment}_{variant}.ssp"
+    res = subprocess.run([sys.executable, "-m", "experiments.cli", "export", experiment, "--variant", variant,
+                          "--stop-time", "2", "-o", str(ssp)], capture_output=True, text=True)
+    assert res.returncode == 0, res.stderr
+    system = read_system(ssp)  # the archive alone: its FMUs are inside
+    assert system.stop_time == 2.0
+    step_ns = round(system.step_size * 1e9)
+    n_steps = system.n_steps
+
+    ours = run_master(system, master="jacobi", progress=False)
+    columns = {c: ours.data[:, j] for j, c in enumerate(ours.columns)}
+
+    log_output_level(CosimLogLevel.WARNING)
+    execution = CosimExecution.from_ssp_file(str(ssp), step_size=step_ns)
+    index = {s.name.decode(): s.index for s in execution.slave_infos()}
+    assert sorted(index) == sorted(c.name for c in system.components)
+    observer = CosimObserver.create_time_series(buffer_size=n_steps + 10)
+    assert execution.add_observer(observer)
+    compared = []
+    for comp in system.components:
+        md = read_model_description(str(comp.fmu))
+        skip = _feedthrough(md)
+        vrs = {v.name: v.valueReference for v in md.modelVariables}
+        for signal in (s for s in ours.columns[1:] if s.startswith(comp.name + ".")):
+            var = signal.split(".", 1)[1]
+            if var not in skip:
+                assert observer.start_time_series(index[comp.name], vrs[var], CosimVariableType.REAL)
+                compared.append((comp.name, var, vrs[var]))
+    assert execution.simulate_until(n_steps * step_ns)
+
+    worst = {}
+    for comp, var, vr in compared:
+        i = index[comp]
+        _, _, x0 = observer.time_series_real_samples(i, vr, from_step=0, sample_count=2)
+        _, steps, x = observer.time_series_real_samples(i, vr, from_step=1, sample_count=n_steps)
+        assert list(steps) == list(range(1, n_steps + 1))
+        ref = columns[f"{comp}.{var}"]
+        if np.ptp(ref) > 0:
+            worst[f"{comp}.{var}"] = relative_deviation([x0[0], *x], ref)
+    assert {c for c, _, _ in compared} == {c.name for c in system.components}, "every FMU is compared"
+    assert len(worst) >= 3 and max(worst.values()) <= RTOL, worst

@@ -2,7 +2,6 @@
 
 What is asserted (and measured when this was written):
 
-* jacobi equals the old ``fmus.cosim.simulate`` bit for bit (every recorded column);
 * container equals jacobi bit for bit (tolerance 0: states, inputs and the
   direct-feedthrough outputs ddy/ddpsi alike), also with a String parameter (a measured
   profile file found in the track FMU's resources inside the container);
@@ -30,7 +29,6 @@ import numpy as np
 import pytest
 from fmpy import read_model_description
 
-from fmus import cosim
 from fmus.errors import UserError
 from fmus.masters import MASTERS, gauss_seidel_order, run
 from fmus.recorder import ArrayRecorder, CsvRecorder
@@ -58,20 +56,6 @@ def results(fmu_dir):
 
 def col(result, name):
     return result.data[:, result.columns.index(name)]
-
-
-def test_jacobi_equals_cosim_simulate(fmu_dir, results):
-    old = cosim.simulate(
-        [cosim.Component("track", fmu_dir / "TrackIrregularity.fmu", dict(TRACK)),
-         cosim.Component("wheelset", fmu_dir / "WheelsetLateral.fmu", {})],
-        [cosim.Connection("track", "alignment_1", "wheelset", "xi"),
-         cosim.Connection("track", "alignment_rate_1", "wheelset", "xi_rate")],
-        stop_time=2.0, step_size=1e-3, progress=False)
-    new = results["jacobi"]
-    assert new.complete and new.master == "jacobi"
-    assert new.columns == list(old)
-    assert new.data.shape == (2001, len(old))
-    np.testing.assert_array_equal(new.data, np.array([old[c] for c in new.columns]).T)
 
 
 def test_container_equals_jacobi_bit_for_bit(results):

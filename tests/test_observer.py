@@ -5,24 +5,10 @@ import numpy as np
 import pytest
 
 from estimators.alignment import AlignmentKalmanFilter
-from fmus.cosim import Component, Connection, simulate
+from helpers import track_wheelset_signals
 
 DT = 1e-3
 COLUMNS = {"ddy": "wheelset.ddy", "dpsi": "wheelset.dpsi", "ddy_f": "wheelset.ddy_f"}
-
-
-def track_wheelset_signals(fmu_dir, track_params, stop_time, out_csv=None):
-    """TrackIrregularity -> WheelsetLateral through the Jacobi master; returns (t, Z, xi_true)
-    with Z the columns ddy, dpsi, ddy_f. (The one place to switch to fmus.masters.run.)"""
-    data = simulate(
-        [Component("track", fmu_dir / "TrackIrregularity.fmu", track_params),
-         Component("wheelset", fmu_dir / "WheelsetLateral.fmu")],
-        [Connection("track", "alignment_1", "wheelset", "xi"),
-         Connection("track", "alignment_rate_1", "wheelset", "xi_rate")],
-        stop_time=stop_time, step_size=DT, out_csv=out_csv, progress=False,
-        record=[("track", "alignment_1"), *(("wheelset", c.split(".")[1]) for c in COLUMNS.values())])
-    Z = np.column_stack([data[c] for c in COLUMNS.values()])
-    return np.asarray(data["time"]), Z, np.asarray(data["track.alignment_1"])
 
 
 @pytest.fixture(scope="module")

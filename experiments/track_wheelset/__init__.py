@@ -1,39 +1,33 @@
-"""Track irregularity FMU driving the wheelset + suspended-frame FMU (seed 000 §3.3).
+"""Track irregularity FMU driving the wheelset + suspended-frame lateral model (seed 000 §3.3).
 
-The leading wheelset's alignment and its rate feed the wheelset model's inputs. Variants:
-``psd`` (ERRI B176 low-level random alignment, the default) and ``harmonic`` (a 1 mm, 20 m
-alignment wave: the wheelset responds at V/lambda = 1 Hz). Until the SSP reader lands, the
-system is declared here in Python; it becomes SystemStructure.ssd + .ssv files.
+The system is ``SystemStructure.ssd``: the track's alignment under the leading wheelset and
+its rate feed the wheelset model; an alignment Kalman filter (estimators.alignment) observes
+the wheelset's noise-free sensor outputs. Variants (``variants/*.ssv``): ``psd`` (ERRI B176
+low-level random alignment, the default) and ``harmonic`` (a 1 mm, 20 m alignment wave: the
+wheelset responds at V/lambda = 1 Hz).
 """
 
-from fmus.cosim import Component, Connection
-
-DESCRIPTION = "Track irregularity FMU driving the wheelset + suspended-frame lateral model"
-STOP_TIME = 20.0  # s: 400 m at 20 m/s, as seed 000 §5
-STEP_SIZE = 1e-3  # s: 1 kHz, the seed's sensor rate
-VARIANTS = {
-    "psd": {"track": {"psd_level": 1}},
-    "harmonic": {"track": {"psd_level": 0, "harmonic_lateral_amplitude": 1e-3, "harmonic_wavelength": 20.0}},
-}
 DEFAULT_VARIANT = "psd"
 PLOTS = {  # file -> (title, one list of (signal, label) per axis)
     "track_input.png": ("Alignment under the leading wheelset and the response",
                         [[("track.alignment_1", "alignment xi"), ("wheelset.y", "wheelset y"),
                           ("wheelset.y_f", "frame y_f")],
-                         [("wheelset.psi", "wheelset yaw psi [rad]")]]),
+                         [("wheelset.psi", "wheelset yaw psi")]]),
     "sensors.png": ("Sensor signals (noise-free)",
-                    [[("wheelset.ddy", "wheelset lateral acc. [m/s2]")],
-                     [("wheelset.dpsi", "wheelset yaw rate [rad/s]")],
-                     [("wheelset.ddy_f", "frame lateral acc. [m/s2]")]]),
+                    [[("wheelset.ddy", "wheelset lateral acc.")],
+                     [("wheelset.dpsi", "wheelset yaw rate")],
+                     [("wheelset.ddy_f", "frame lateral acc.")]]),
 }
 
 
-def system(fmu_dir, variant: str):
-    params = VARIANTS[variant]
-    components = [Component("track", fmu_dir / "TrackIrregularity.fmu", dict(params.get("track", {}))),
-                  Component("wheelset", fmu_dir / "WheelsetLateral.fmu", dict(params.get("wheelset", {})))]
-    connections = [Connection("track", "alignment_1", "wheelset", "xi"),
-                   Connection("track", "alignment_rate_1", "wheelset", "xi_rate")]
-    record = [("track", "position"), ("track", "alignment_1"), ("track", "alignment_rate_1"),
-              *[("wheelset", n) for n in ("y", "psi", "y_f", "dy", "dpsi", "dy_f", "ddy", "ddy_f")]]
-    return components, connections, record
+def table_md(table: dict[str, dict]) -> str:
+    """The study table: one row per variant (no published numbers for this system)."""
+    L = ["| variant | master | alignment rms [mm] | y rms [mm] | xi estimate rel. error | wall [s] |",
+         "|---|---|---|---|---|---|"]
+    for variant, m in table.items():
+        xi = m.get("observers", {}).get("alignment", {}).get("xi", {})
+        rel = xi.get("rel_error")
+        L.append(f"| {variant} | {m['master']} | {1e3 * m['rms']['track.alignment_1']:.3f} | "
+                 f"{1e3 * m['rms']['wheelset.y']:.3f} | {'-' if rel is None else f'{rel:.3f}'} | "
+                 f"{m['wall_time_s']:.2f} |")
+    return "\n".join(L)

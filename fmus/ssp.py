@@ -1,0 +1,559 @@
+"""SSP 1.0 experiments as a :class:`fmus.system.System`: read, check, validate, write back.
+
+:func:`read_system` applies what FMPy's own SSP support skips: parameter bindings in the SSD
+(inline and ``.ssv``), ``.ssm`` mappings, ``ssc:LinearTransformation``, unit checks and
+conversions, ``ssd:DefaultExperiment`` and a fixed step size from an annotation. Parameter
+values, lowest priority first:
+
+    FMU start values < component-level bindings (document order) < system-level bindings
+    (``component.param``) < the variant (``variants/<v>.ssv``) < ``overrides`` (``--set``)
+
+Every problem a user can cause is a one-line :class:`UserError` naming the file (with its
+line), the element and what is wrong. Unknown parameter names are errors even where SSP lets
+a tool ignore them: a typo in a study must not pass silently.
+
+Helpers: ``ssp_xml`` (files, XML, schemas), ``ssp_units`` (unit algebra), ``ssp_params``
+(parameter sets, mappings, value checks), ``ssp_write`` (the ``.ssp`` writer).
+"""
+
+from __future__ import annotations
+
+import math
+import zipfile
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from fmpy import read_model_description
+from lxml import etree
+
+from .errors import UserError
+from .ssp_params import (
+    ParamValue,
+    apply_mapping,
+    from_cli,
+    from_ssv,
+    read_mapping,
+    read_parameter_set,
+    why_not_settable,
+)
+from .ssp_units import (
+    IDENTITY,
+    OURS,
+    Affine,
+    UnitError,
+    Units,
+    compose,
+    conversion,
+    from_fmu,
+    from_ssc,
+    tidy,
+)
+from .ssp_write import write_ssp
+from .ssp_xml import (
+    NS,
+    SSC_NS,
+    Root,
+    children,
+    local,
+    locate,
+    one_line,
+    parse_checked,
+    parse_xml,
+    schema_problems,
+)
+from .system import Component, Connection, ObserverSpec, System, Value
+
+__all__ = ["list_variants", "read_system", "validate_ssp", "write_ssp"]
+
+FMU_TYPE = "application/x-fmu-sharedlibrary"
+PARAMETER_SET = "application/x-ssp-parameter-set"
+RECORDER, OBSERVERS, EXPERIMENT, OSP = ("org.railfmu.recorder", "org.railfmu.observers",
+                                        "org.railfmu.experiment", "com.opensimulationplatform")
+
+
+def read_system(path, variant: str | None = None, fmu_dirs=(), overrides: dict[str, dict[str, object]] | None = None,
+                start_time: float | None = None, stop_time: float | None = None,
+                step_size: float | None = None) -> System:
+    """The system of an SSP (a ``.ssd``, a folder holding ``SystemStructure.ssd``, or a
+    ``.ssp``) with ``variant`` (a name in ``variants/`` or a path to an ``.ssv``) and
+    ``overrides`` ({component: {parameter: value}}) applied. FMUs missing from the SSP are
+    looked up by file name in ``fmu_dirs``. Time arguments override the SSD's."""
+    root = locate(path)
+    try:
+        system = _Reader(root, fmu_dirs).read(variant, overrides or {}, (start_time, stop_time, step_size))
+    except (etree.LxmlError, zipfile.BadZipFile, KeyError, ValueError, TypeError) as exc:
+        # a safety net: whatever slipped through the checks still becomes one line
+        raise UserError(f"{root.show(root.ssd)}: cannot read the SSP ({type(exc).__name__}: "
+                        f"{one_line(exc)})") from None
+    system.source = Path(path)
+    return system
+
+
+def list_variants(path) -> list[str]:
+    """The names of ``variants/*.ssv`` of an experiment folder, ``.ssd`` or ``.ssp``, sorted."""
+    return _variants(locate(path))
+
+
+def _variants(root: Root) -> list[str]:
+    folder = root.dir / "variants"
+    return sorted(p.stem for p in folder.glob("*.ssv")) if folder.is_dir() else []
+
+
+def validate_ssp(path, fmu_dirs=()) -> list[str]:
+    """Every problem found in an SSP: schema errors of each .ssd/.ssv/.ssm, unresolved
+    references (the first per variant), and each contained FMU's problems
+    (:func:`fmus.build.validate`). [] if none. Raises only if ``path`` does not exist.
+    ``fmu_dirs``: where to look for FMUs the SSP does not contain (an experiment folder)."""
+    from .build import validate
+
+    given = Path(path)
+    if not given.exists():
+        raise UserError(f"{given}: no such file or directory")
+    try:
+        root = locate(given)
+    except UserError as exc:
+        return [str(exc)]
+    problems: list[str] = []
+    kinds = {".ssd": "ssd", ".ssv": "ssv", ".ssm": "ssm"}
+    for f in sorted(root.dir.rglob("*")):
+        if f.suffix in kinds and f.is_file():
+            try:
+                problems += schema_problems(parse_xml(f, root.show(f)), kinds[f.suffix], root.show(f))
+            except UserError as exc:
+                problems.append(str(exc))
+        elif f.suffix == ".fmu" and f.is_file():
+            try:
+                problems += [f"{root.show(f)}: {one_line(p)}" for p in validate(f)]
+            except Exception as exc:  # noqa: BLE001 - a broken FMU is a finding here, not a crash
+                problems.append(f"{root.show(f)}: cannot validate: {one_line(exc)}")
+    for variant in [None, *_variants(root)]:
+        try:
+            _Reader(root, fmu_dirs).read(variant, {}, (None, None, None), need_time=False)
+        except UserError as exc:
+            problems.append(str(exc))
+        except Exception as exc:  # noqa: BLE001 - validation reports, it does not crash
+            problems.append(f"{root.show(root.ssd)}: cannot read the SSP ({type(exc).__name__}: {one_line(exc)})")
+    return list(dict.fromkeys(problems))  # a schema error also stops the reader: report it once
+
+
+# -- the reader ------------------------------------------------------------------------------
+
+@dataclass
+class _Comp:
+    name: str
+    fmu: Path
+    md: object  # fmpy ModelDescription
+    units: Units  # the FMU's unit definitions, then ours
+    connectors: dict[str, str | None] = field(default_factory=dict)  # declared: name -> unit
+    params: dict[str, Value] = field(default_factory=dict)
+
+    def __post_init__(self):
+        self.vars = {v.name: v for v in self.md.modelVariables}
+
+
+class _Reader:
+    def __init__(self, root: Root, fmu_dirs=()):
+        self.root = root
+        self.fmu_dirs = [Path(d) for d in fmu_dirs]
+        self.file = root.show(root.ssd)
+        self.doc = parse_checked(root.ssd, "ssd", self.file)
+        self.system = self.doc.find("ssd:System", NS)
+        self.ssd_units = Units(from_ssc(self.doc.find("ssd:Units", NS)))
+        self.comps: dict[str, _Comp] = {}
+        self._mds: dict[Path, object] = {}
+
+    def at(self, el) -> str:
+        return f"{self.file}:{el.sourceline}"
+
+    def known(self) -> str:
+        return f"known components: {', '.join(self.comps) or '(none)'}"
+
+    def read(self, variant, overrides, times, need_time: bool = True) -> System:
+        elements = self._components()
+        connections = self._connections()
+        for el, comp in elements:  # component level: bare names
+            for v in self._bindings(el, f"Component {comp.name!r}"):
+                self._set(comp, v)
+        for v in self._bindings(self.system, ""):
+            self._set(*self._split(v))
+        if variant is not None:
+            self._variant(variant)
+        self._overrides(overrides)
+        start, stop, step = self._time(*times, need=need_time)
+        record, observers = self._annotations()
+        return System(name=self.doc.get("name") or self.system.get("name"),
+                      components=[Component(c.name, c.fmu, dict(c.params)) for c in self.comps.values()],
+                      connections=connections, start_time=start, stop_time=stop, step_size=step,
+                      record=record, observers=observers,
+                      description=self.doc.get("description") or self.system.get("description") or "",
+                      warnings=self._unconnected(connections))
+
+    # -- components and their FMUs ---------------------------------------------------------
+    def _components(self) -> list:
+        out = []
+        elements = self.system.find("ssd:Elements", NS)
+        for el in children(elements) if elements is not None else []:
+            kind, name = local(el), el.get("name")
+            if kind == "System":
+                raise UserError(f"{self.at(el)}: System {name!r}: nested systems are not supported; "
+                                "put its components in the top-level system")
+            if kind != "Component":
+                raise UserError(f"{self.at(el)}: {kind} {name!r} is not supported")
+            out.append((el, self._component(el)))
+        return out
+
+    def _component(self, el) -> _Comp:
+        name = el.get("name")
+        where = f"{self.at(el)}: Component {name!r}"
+        if name in self.comps:
+            raise UserError(f"{where}: a second element with this name")
+        if el.get("type", FMU_TYPE) != FMU_TYPE:
+            raise UserError(f"{where}: type {el.get('type')!r} is not supported (only {FMU_TYPE})")
+        if el.get("implementation", "any") not in ("any", "CoSimulation"):
+            raise UserError(f"{where}: implementation {el.get('implementation')!r} is not supported "
+                            "(co-simulation FMUs only)")
+        fmu = self._fmu_file(el.get("source"), where)
+        md = self._model_description(fmu, where)
+        comp = _Comp(name, fmu, md, Units(from_fmu(md)).then(OURS))
+        self.comps[name] = comp
+        for c in el.iterfind("ssd:Connectors/ssd:Connector", NS):
+            self._connector(comp, c)
+        return comp
+
+    def _fmu_file(self, source: str, where: str) -> Path:
+        path = self.root.resolve(source, where)
+        if path.is_file():
+            return path
+        for d in self.fmu_dirs:  # an experiment folder refers to FMUs built elsewhere
+            if (d / path.name).is_file():
+                return d / path.name
+        raise UserError(f"{where}: FMU {source} not found (run `railfmu build`)")
+
+    def _model_description(self, fmu: Path, where: str):
+        key = fmu.resolve()
+        if key not in self._mds:
+            try:
+                md = read_model_description(str(fmu))
+            except Exception as exc:  # noqa: BLE001 - fmpy raises anything from BadZipFile to ValidationError
+                raise UserError(f"{where}: cannot read {fmu.name}: {one_line(exc)}") from None
+            if md.fmiVersion != "2.0" or md.coSimulation is None:
+                raise UserError(f"{where}: {fmu.name} is not an FMI 2.0 co-simulation FMU "
+                                f"(fmiVersion {md.fmiVersion})")
+            self._mds[key] = md
+        return self._mds[key]
+
+    def _connector(self, comp: _Comp, el) -> None:
+        """A declared connector must match its FMU variable: kind vs causality (FMI 2.0), type,
+        and a unit of the same dimension (then the connector shows the variable in its unit)."""
+        name, kind = el.get("name"), el.get("kind")
+        where = f"{self.at(el)}: Connector {comp.name}.{name}"
+        var = comp.vars.get(name)
+        if var is None:
+            raise UserError(f"{where}: {comp.fmu.name} has no variable {name!r}")
+        if kind != var.causality:
+            raise UserError(f"{where}: kind {kind!r} does not match the FMU variable's causality "
+                            f"{var.causality!r}")
+        typed = next(iter(children(el, SSC_NS)), None)
+        unit = None
+        if typed is not None:
+            if local(typed) != var.type:
+                raise UserError(f"{where}: type ssc:{local(typed)} does not match the FMU variable's "
+                                f"type {var.type}")
+            unit = typed.get("unit") if var.type == "Real" else None
+            try:
+                conversion(var.unit, comp.units, unit, self.ssd_units.then(comp.units))
+            except UnitError as exc:
+                raise UserError(f"{where}: {exc} (the FMU variable's unit is {var.unit!r})") from None
+        comp.connectors[name] = unit or var.unit
+
+    # -- connections ----------------------------------------------------------------------
+    def _connections(self) -> list[Connection]:
+        out, fed = [], {}
+        for el in self.system.iterfind("ssd:Connections/ssd:Connection", NS):
+            c = self._connection(el)
+            if (c.dst, c.dst_var) in fed:
+                raise UserError(f"{self.at(el)}: Connection {c}: input {c.dst}.{c.dst_var} is already "
+                                f"connected (line {fed[c.dst, c.dst_var]})")
+            fed[c.dst, c.dst_var] = el.sourceline
+            out.append(c)
+        return out
+
+    def _connection(self, el) -> Connection:
+        s, sc, d, dc = (el.get(a) for a in ("startElement", "startConnector", "endElement", "endConnector"))
+        where = f"{self.at(el)}: Connection {s or ''}.{sc} -> {d or ''}.{dc}"
+        if s is None or d is None:
+            raise UserError(f"{where}: connections to system-level connectors are not supported "
+                            "(connect the components directly)")
+        src, svar = self._end(s, sc, where)
+        dst, dvar = self._end(d, dc, where)
+        if svar.causality not in ("output", "parameter", "calculatedParameter"):
+            raise UserError(f"{where}: start {s}.{sc} is an {svar.causality}; a connection starts at "
+                            "an output (or a parameter)")
+        if dvar.causality != "input":
+            raise UserError(f"{where}: end {d}.{dc} is a(n) {dvar.causality}; a connection ends at an input")
+        if svar.type != dvar.type:
+            raise UserError(f"{where}: type mismatch: {svar.type} -> {dvar.type}")
+        factor, offset = self._connection_map(el, where, src, svar, dst, dvar)
+        return Connection(s, sc, d, dc, factor, offset)
+
+    def _end(self, name: str, connector: str, where: str):
+        comp = self.comps.get(name)
+        if comp is None:
+            raise UserError(f"{where}: no component {name!r}; {self.known()}")
+        var = comp.vars.get(connector)
+        if var is None:
+            raise UserError(f"{where}: {comp.fmu.name} (Component {name!r}) has no variable {connector!r}")
+        return comp, var
+
+    def _connection_map(self, el, where, src: _Comp, svar, dst: _Comp, dvar) -> Affine:
+        """The connection's dst = factor * src + offset.
+
+        SSP 1.0 (ssc:LinearTransformation): unit conversion comes first, "the value of source is
+        already converted to the target unit", so target = factor * converted + offset; with
+        suppressUnitConversion="true" the transformation replaces that conversion. A connector
+        shows its FMU variable in the connector's unit, so the whole chain is
+            start variable -> start connector -> [unit conversion] -> LinearTransformation
+            -> end connector -> end variable,
+        where the outer two steps are identities unless a connector declares another unit.
+        """
+        linear = IDENTITY
+        for t in children(el, SSC_NS):
+            if local(t) != "LinearTransformation":
+                raise UserError(f"{where}: ssc:{local(t)} on a connection is not supported")
+            linear = (float(t.get("factor", 1.0)), float(t.get("offset", 0.0)))
+        if svar.type != "Real":
+            if linear != IDENTITY:
+                raise UserError(f"{where}: a LinearTransformation needs Real connectors, not {svar.type}")
+            return IDENTITY
+        s_unit, d_unit = src.connectors.get(svar.name, svar.unit), dst.connectors.get(dvar.name, dvar.unit)
+        s_view, d_view = self.ssd_units.then(src.units), self.ssd_units.then(dst.units)
+        try:
+            m = conversion(svar.unit, src.units, s_unit, s_view)
+            if el.get("suppressUnitConversion") not in ("true", "1"):
+                m = compose(m, conversion(s_unit, s_view, d_unit, d_view))
+            m = compose(compose(m, linear), conversion(d_unit, d_view, dvar.unit, dst.units))
+        except UnitError as exc:
+            raise UserError(f"{where}: unit mismatch: {exc}") from None
+        if not all(map(math.isfinite, m)):  # INF/NaN are valid xs:double, not a valid signal map
+            raise UserError(f"{where}: non-finite factor or offset ({m[0]!r}, {m[1]!r})")
+        return tidy(m)
+
+    # -- parameter values -------------------------------------------------------------------
+    def _bindings(self, owner, label: str) -> list[ParamValue]:
+        """The values of ``owner``'s ParameterBindings in document order, names as written
+        (with the binding's prefix)."""
+        out = []
+        for b in owner.iterfind("ssd:ParameterBindings/ssd:ParameterBinding", NS):
+            where = f"{self.at(b)}: ParameterBinding" + (f" of {label}" if label else "")
+            if b.get("type", PARAMETER_SET) != PARAMETER_SET:
+                raise UserError(f"{where}: type {b.get('type')!r} is not supported (only {PARAMETER_SET})")
+            if b.get("sourceBase", "SSD") != "SSD":
+                raise UserError(f"{where}: sourceBase={b.get('sourceBase')!r} is not supported")
+            if b.get("source"):
+                file = self._file(b.get("source"), where)
+                shown = self.root.show(file)
+                pset = parse_checked(file, "ssv", shown)
+            else:
+                shown, pset = self.file, b.find("ssd:ParameterValues/ssv:ParameterSet", NS)
+                if pset is None:
+                    raise UserError(f"{where}: neither a source nor an inline ssv:ParameterSet")
+            values = read_parameter_set(pset, shown, self.ssd_units, label)
+            pm = b.find("ssd:ParameterMapping", NS)
+            if pm is not None:
+                values = apply_mapping(values, self._mapping(pm, where))
+            for v in values:
+                v.name = b.get("prefix", "") + v.name
+            out += values
+        return out
+
+    def _mapping(self, el, where: str):
+        if el.get("sourceBase", "SSD") != "SSD":
+            raise UserError(f"{where}: ParameterMapping sourceBase={el.get('sourceBase')!r} is not supported")
+        if el.get("source"):
+            file = self._file(el.get("source"), where)
+            return read_mapping(parse_checked(file, "ssm", self.root.show(file)), self.root.show(file))
+        pm = el.find("ssm:ParameterMapping", NS)
+        if pm is None:
+            raise UserError(f"{where}: ParameterMapping has neither a source nor an inline ssm:ParameterMapping")
+        return read_mapping(pm, self.file)
+
+    def _file(self, source: str, where: str) -> Path:
+        path = self.root.resolve(source, where)
+        if not path.is_file():
+            raise UserError(f"{where}: {source} not found")
+        return path
+
+    def _split(self, v: ParamValue) -> tuple[_Comp, ParamValue]:
+        """A system-level name ``component.parameter``: the component and the bare name."""
+        for name in sorted(self.comps, key=len, reverse=True):  # the longest matching name
+            if v.name.startswith(name + "."):
+                v.name = v.name[len(name) + 1:]
+                return self.comps[name], v
+        raise UserError(f"{v.where}: no component {v.name.partition('.')[0]!r} (system-level names are "
+                        f"component.parameter); {self.known()}")
+
+    def _settable(self, comp: _Comp, name: str, where: str):
+        var = comp.vars.get(name)
+        if var is None:
+            raise UserError(f"{where}: {comp.fmu.name} has no variable {name!r}")
+        why = why_not_settable(var)
+        if why:
+            raise UserError(f"{where}: {comp.fmu.name} variable {name!r} {why}; it cannot be set")
+        return var
+
+    def _set(self, comp: _Comp, v: ParamValue) -> None:
+        var = self._settable(comp, v.name, v.where)
+        comp.params[var.name] = from_ssv(v, var, comp.units)
+
+    def _variant(self, variant: str) -> None:
+        file = Path(variant)
+        if file.suffix != ".ssv":
+            file = self.root.dir / "variants" / f"{variant}.ssv"
+            if not file.is_file():
+                known = ", ".join(_variants(self.root)) or "(none)"
+                raise UserError(f"{self.file}: unknown variant {variant!r}; known variants: {known}")
+        elif not file.is_file():
+            raise UserError(f"{file}: variant file not found")
+        shown = self.root.show(file)
+        for v in read_parameter_set(parse_checked(file, "ssv", shown), shown, self.ssd_units):
+            self._set(*self._split(v))
+
+    def _overrides(self, overrides: dict) -> None:
+        for cname, values in overrides.items():
+            comp = self.comps.get(cname)
+            if comp is None:
+                first = next(iter(values), "?")
+                raise UserError(f"--set {cname}.{first}: no component {cname!r}; {self.known()}")
+            for name, value in values.items():
+                where = f"--set {cname}.{name}"
+                comp.params[name] = from_cli(value, self._settable(comp, name, where), where)
+
+    # -- time ---------------------------------------------------------------------------------
+    def _time(self, start, stop, step, need: bool):
+        de = self.doc.find("ssd:DefaultExperiment", NS)
+        if de is not None:
+            start = start if start is not None else self._number(de, "startTime")
+            stop = stop if stop is not None else self._number(de, "stopTime")
+            step = step if step is not None else self._step(de)
+        start = 0.0 if start is None else float(start)
+        if not need and (stop is None or step is None):
+            return start, stop if stop is not None else start + 1.0, step or 1.0
+        if stop is None:
+            raise UserError(f"{self.file}: no stop time: ssd:DefaultExperiment has no stopTime "
+                            "and none was given (--stop-time)")
+        if step is None:
+            raise UserError(f"{self.file}: no step size: add an {EXPERIMENT} annotation (rf:FixedStep "
+                            "stepSize) to ssd:DefaultExperiment or give --step-size")
+        stop, step = float(stop), float(step)
+        if not all(map(math.isfinite, (start, stop, step))):
+            raise UserError(f"{self.file}: start {start:g}, stop {stop:g} and step {step:g} s must be finite")
+        if step <= 0:
+            raise UserError(f"{self.file}: step size {step:g} s must be positive")
+        if stop <= start:
+            raise UserError(f"{self.file}: stop time {stop:g} s must be after the start time {start:g} s")
+        n = (stop - start) / step
+        if abs(n - round(n)) > 1e-9 * n:
+            raise UserError(f"{self.file}: step size {step:g} s does not divide the interval "
+                            f"[{start:g}, {stop:g}] s")
+        return start, stop, step
+
+    def _step(self, de) -> float | None:
+        """Our rf:FixedStep, else libcosim's osp:FixedStepAlgorithm."""
+        a = self._annotation(de, EXPERIMENT)
+        fs = a.find("rf:FixedStep", NS) if a is not None else None
+        if fs is not None:
+            return self._number(fs, "stepSize")
+        a = self._annotation(de, OSP)
+        fs = a.find("osp:Algorithm/osp:FixedStepAlgorithm", NS) if a is not None else None
+        return self._number(fs, "baseStepSize") if fs is not None else None
+
+    def _number(self, el, attr: str) -> float | None:
+        text = el.get(attr)
+        if text is None:
+            return None
+        try:
+            return float(text)
+        except ValueError:
+            raise UserError(f"{self.at(el)}: {local(el)} {attr}={text!r} is not a number") from None
+
+    # -- our annotations: recorder and observers ------------------------------------------
+    @staticmethod
+    def _annotation(parent, kind: str):
+        return next((a for a in parent.iterfind("ssd:Annotations/ssc:Annotation", NS)
+                     if a.get("type") == kind), None)
+
+    def _annotations(self) -> tuple[list[str], list[ObserverSpec]]:
+        record: list[str] = []
+        a = self._annotation(self.system, RECORDER)
+        for r in a.iterfind("rf:Recorder/rf:Record", NS) if a is not None else []:
+            record.append(self._signal(r, f"{self.at(r)}: Record"))
+        a = self._annotation(self.system, OBSERVERS)
+        observers = [self._observer(o) for o in a.iterfind("rf:Observers/rf:Observer", NS)] if a is not None else []
+        if record:  # observers read recorded signals: make sure theirs are recorded
+            record += [s for o in observers for s in (*o.inputs.values(), *o.truth.values())]
+        return list(dict.fromkeys(record)), observers
+
+    def _signal(self, el, where: str) -> str:
+        ref = el.get("connector")
+        if not ref:
+            raise UserError(f"{where}: no connector attribute (component.variable)")
+        for name in sorted(self.comps, key=len, reverse=True):
+            if ref.startswith(name + "."):
+                comp, var = self.comps[name], ref[len(name) + 1:]
+                if var not in comp.vars:
+                    raise UserError(f"{where} {ref!r}: {comp.fmu.name} has no variable {var!r}")
+                return ref
+        raise UserError(f"{where} {ref!r}: no component {ref.partition('.')[0]!r}; {self.known()}")
+
+    def _observer(self, el) -> ObserverSpec:
+        name, cls = el.get("name"), el.get("class")
+        where = f"{self.at(el)}: Observer {name!r}"
+        if not name or not cls:
+            raise UserError(f"{where}: needs a name and a class attribute")
+
+        def named(tag: str) -> dict:
+            out = {}
+            for e in el.iterfind(f"rf:{tag}", NS):
+                if not e.get("name"):
+                    raise UserError(f"{self.at(e)}: Observer {name!r}: {tag} without a name")
+                out[e.get("name")] = e
+            return out
+
+        return ObserverSpec(
+            name, cls,
+            inputs={k: self._signal(e, f"{self.at(e)}: Observer {name!r} Input {k!r}")
+                    for k, e in named("Input").items()},
+            truth={k: self._signal(e, f"{self.at(e)}: Observer {name!r} Truth {k!r}")
+                   for k, e in named("Truth").items()},
+            settings={k: _setting(e.get("value", "")) for k, e in named("Setting").items()})
+
+    def _unconnected(self, connections: list[Connection]) -> list[str]:
+        fed = {(c.dst, c.dst_var) for c in connections}
+        out = []
+        for comp in self.comps.values():
+            for var in comp.md.modelVariables:
+                if var.causality == "input" and (comp.name, var.name) not in fed:
+                    what, value = (("its bound value", comp.params[var.name]) if var.name in comp.params
+                                   else ("its start value", var.start))
+                    out.append(f"{comp.name}.{var.name}: input not connected; keeps {what} {_show(value)}")
+        return out
+
+
+def _setting(text: str) -> Value:
+    """An observer setting as bool, int, float or str (in that order of preference)."""
+    t = text.strip()
+    if t in ("true", "false"):
+        return t == "true"
+    for parse in (int, float):
+        try:
+            return parse(t)
+        except ValueError:
+            pass
+    return text
+
+
+def _show(value) -> str:
+    try:
+        return f"{float(value):g}" if not isinstance(value, bool) else str(value).lower()
+    except (TypeError, ValueError):
+        return repr(value)

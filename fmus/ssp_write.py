@@ -1,0 +1,216 @@
+"""A :class:`fmus.system.System` as a self-contained ``.ssp``: ``SystemStructure.ssd`` plus its
+FMUs in ``resources/``.
+
+What other importers need (libcosim in particular) is kept explicit: every component carries
+ONE inline ``ssv:ParameterSet`` with its final values (libcosim applies component-level
+bindings only), the step size is written both as our ``rf:FixedStep`` and as libcosim's
+``osp:FixedStepAlgorithm``, and each connection's affine map is a ``ssc:LinearTransformation``.
+Reading the archive back gives an equal System (apart from paths).
+"""
+
+from __future__ import annotations
+
+import os
+import zipfile
+from pathlib import Path
+
+from fmpy import read_model_description
+from lxml import etree
+
+from .errors import UserError
+from .ssp_units import BASE, OURS, Units, from_fmu
+from .ssp_xml import (
+    NS,
+    OSP_NS,
+    RF_NS,
+    SSC_NS,
+    SSD_NS,
+    SSV_NS,
+    one_line,
+    schema_problems,
+)
+from .system import System
+
+_KINDS = ("input", "output", "parameter", "calculatedParameter")  # causalities a connector can show
+
+
+def write_ssp(system: System, out: Path) -> Path:
+    """Write ``system`` to the zip archive ``out`` (replaced atomically) and return its path."""
+    out = Path(out)
+    mds = {}
+    for c in system.components:
+        if not Path(c.fmu).is_file():
+            raise UserError(f"Component {c.name!r}: FMU {c.fmu} not found (run `railfmu build`)")
+        try:
+            mds[c.name] = read_model_description(str(c.fmu))
+        except Exception as exc:  # noqa: BLE001 - as in the reader: any fmpy failure
+            raise UserError(f"Component {c.name!r}: cannot read {c.fmu}: {one_line(exc)}") from None
+    resources = _resource_names(system)
+    doc = _document(system, mds, resources)
+    problems = schema_problems(doc, "ssd", "SystemStructure.ssd")
+    if problems:  # our own output: a bug, not a user error
+        raise RuntimeError(f"write_ssp produced an invalid SSD: {problems[0]}")
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tmp = out.with_name(out.name + ".part")
+    try:
+        with zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as zf:
+            zf.writestr("SystemStructure.ssd", etree.tostring(doc, xml_declaration=True, encoding="UTF-8",
+                                                              pretty_print=True))
+            for fmu, arcname in dict.fromkeys((Path(c.fmu), resources[c.name]) for c in system.components):
+                zf.write(fmu, arcname)
+        os.replace(tmp, out)  # a reader never sees half an archive
+    finally:
+        tmp.unlink(missing_ok=True)
+    return out
+
+
+def _resource_names(system: System) -> dict[str, str]:
+    """Component -> 'resources/<file>.fmu'; one copy per FMU file, distinct names for distinct files."""
+    by_file: dict[Path, str] = {}
+    taken: set[str] = set()
+    out = {}
+    for c in system.components:
+        key = Path(c.fmu).resolve()
+        if key not in by_file:
+            name = f"resources/{key.name}"
+            if name in taken:
+                name = f"resources/{c.name}_{key.name}"
+            by_file[key] = name
+            taken.add(name)
+        out[c.name] = by_file[key]
+    return out
+
+
+def _sub(parent, tag: str, **attrs):
+    prefix, _, name = tag.partition(":")
+    el = etree.SubElement(parent, f"{{{NS[prefix]}}}{name}")
+    for k, v in attrs.items():
+        if v is not None:
+            el.set(k, v)
+    return el
+
+
+def _num(x: float) -> str:
+    return repr(float(x))  # shortest text that reads back to the same double
+
+
+def _document(system: System, mds: dict, resources: dict[str, str]):
+    nsmap = {"ssd": SSD_NS, "ssc": SSC_NS, "ssv": SSV_NS, "rf": RF_NS, "osp": OSP_NS}
+    doc = etree.Element(f"{{{SSD_NS}}}SystemStructureDescription", nsmap=nsmap, version="1.0",
+                        name=system.name)
+    if system.description:
+        doc.set("description", system.description)
+    sys_el = _sub(doc, "ssd:System", name=system.name)
+    elements = _sub(sys_el, "ssd:Elements")
+    used_units: dict[str, Units] = {}
+    shown = _shown_variables(system)
+    for c in system.components:
+        md = mds[c.name]
+        units = Units(from_fmu(md)).then(OURS)
+        comp = _sub(elements, "ssd:Component", name=c.name, source=resources[c.name],
+                    type="application/x-fmu-sharedlibrary")
+        declared = [v for v in md.modelVariables if v.name in shown.get(c.name, ()) and v.causality in _KINDS]
+        if declared:
+            connectors = _sub(comp, "ssd:Connectors")
+            for v in declared:
+                conn = _sub(connectors, "ssd:Connector", name=v.name, kind=v.causality)
+                _sub(conn, f"ssc:{v.type}", unit=v.unit if v.type == "Real" and v.unit else None)
+                if v.type == "Real" and v.unit:
+                    used_units[v.unit] = units
+        if c.parameters:
+            _parameters(comp, c, {v.name: v for v in md.modelVariables})
+    if system.connections:
+        conns = _sub(sys_el, "ssd:Connections")
+        variables = {c.name: {v.name: v for v in mds[c.name].modelVariables} for c in system.components}
+        for k in system.connections:
+            su, du = variables[k.src][k.src_var].unit, variables[k.dst][k.dst_var].unit
+            # the map below is complete: a reader must not convert units on top of it
+            suppress = "true" if su and du and su != du else None
+            el = _sub(conns, "ssd:Connection", startElement=k.src, startConnector=k.src_var,
+                      endElement=k.dst, endConnector=k.dst_var, suppressUnitConversion=suppress)
+            if not k.identity:
+                _sub(el, "ssc:LinearTransformation", factor=_num(k.factor), offset=_num(k.offset))
+    _system_annotations(sys_el, system)
+    _units(doc, used_units)
+    _experiment(doc, system)
+    return doc
+
+
+def _shown_variables(system: System) -> dict[str, set[str]]:
+    """Variables that get a connector: connected, recorded, or read by an observer."""
+    out: dict[str, set[str]] = {}
+    refs = [(k.src, k.src_var) for k in system.connections] + [(k.dst, k.dst_var) for k in system.connections]
+    names = [c.name for c in system.components]
+    signals = list(system.record) + [s for o in system.observers for s in (*o.inputs.values(), *o.truth.values())]
+    for s in signals:
+        comp = next((n for n in sorted(names, key=len, reverse=True) if s.startswith(n + ".")), None)
+        if comp:
+            refs.append((comp, s[len(comp) + 1:]))
+    for comp, var in refs:
+        out.setdefault(comp, set()).add(var)
+    return out
+
+
+def _parameters(comp_el, c, variables: dict) -> None:
+    """One inline parameter set with the component's final values (what libcosim reads)."""
+    binding = _sub(_sub(comp_el, "ssd:ParameterBindings"), "ssd:ParameterBinding")
+    pset = _sub(_sub(binding, "ssd:ParameterValues"), "ssv:ParameterSet", version="1.0", name=c.name)
+    params = _sub(pset, "ssv:Parameters")
+    for name, value in c.parameters.items():
+        var = variables.get(name)
+        p = _sub(params, "ssv:Parameter", name=name)
+        t = var.type if var is not None else {bool: "Boolean", int: "Integer", str: "String"}.get(type(value))
+        if t == "Boolean":
+            _sub(p, "ssv:Boolean", value="true" if value else "false")
+        elif t in ("Integer", "Enumeration"):
+            _sub(p, "ssv:Integer", value=str(int(value)))
+        elif t == "String":
+            _sub(p, "ssv:String", value=str(value))
+        else:
+            _sub(p, "ssv:Real", value=_num(value), unit=var.unit if var is not None and var.unit else None)
+
+
+def _units(doc, used: dict[str, Units]) -> None:
+    """ssd:Units for every unit a connector names (the schema wants them defined in the file)."""
+    defined = [(name, units.get(name)) for name, units in sorted(used.items())]
+    defined = [(n, u) for n, u in defined if u is not None]
+    if not defined:
+        return
+    units_el = etree.Element(f"{{{SSD_NS}}}Units")
+    doc.find("ssd:System", NS).addnext(units_el)  # order: System, Enumerations, Units, DefaultExperiment
+    for name, u in defined:
+        base = {b: str(e) for b, e in zip(BASE, u.exponents) if e}
+        if u.factor != 1.0:
+            base["factor"] = _num(u.factor)
+        if u.offset != 0.0:
+            base["offset"] = _num(u.offset)
+        _sub(_sub(units_el, "ssc:Unit", name=name), "ssc:BaseUnit", **base)
+
+
+def _experiment(doc, system: System) -> None:
+    de = _sub(doc, "ssd:DefaultExperiment", startTime=_num(system.start_time), stopTime=_num(system.stop_time))
+    annotations = _sub(de, "ssd:Annotations")
+    a = _sub(annotations, "ssc:Annotation", type="org.railfmu.experiment")
+    _sub(a, "rf:FixedStep", stepSize=_num(system.step_size))
+    a = _sub(annotations, "ssc:Annotation", type="com.opensimulationplatform")  # what libcosim reads
+    _sub(_sub(a, "osp:Algorithm"), "osp:FixedStepAlgorithm", baseStepSize=_num(system.step_size))
+
+
+def _system_annotations(sys_el, system: System) -> None:
+    if not system.observers and not system.record:
+        return
+    annotations = _sub(sys_el, "ssd:Annotations")
+    if system.observers:
+        observers = _sub(_sub(annotations, "ssc:Annotation", type="org.railfmu.observers"), "rf:Observers")
+        for o in system.observers:
+            el = _sub(observers, "rf:Observer", name=o.name)
+            el.set("class", o.cls)
+            for tag, table in (("rf:Input", o.inputs), ("rf:Truth", o.truth)):
+                for k, ref in table.items():
+                    _sub(el, tag, name=k, connector=ref)
+            for k, v in o.settings.items():
+                _sub(el, "rf:Setting", name=k, value=str(v).lower() if isinstance(v, bool) else str(v))
+    if system.record:
+        recorder = _sub(_sub(annotations, "ssc:Annotation", type="org.railfmu.recorder"), "rf:Recorder")
+        for ref in system.record:
+            _sub(recorder, "rf:Record", connector=ref)

@@ -1,0 +1,174 @@
+"""Where an SSP's files are, and its XML parsed and checked against the SSP 1.0 schemas.
+
+An SSP is a folder (or a ``.ssp`` zip) whose ``SystemStructure.ssd`` refers to FMUs, ``.ssv``
+and ``.ssm`` files by URIs relative to that folder: the SSP root. Messages name files as the
+user gave them (``experiments/x/variants/a.ssv``, ``x.ssp/SystemStructure.ssd``), never the
+temporary folder an archive is extracted into.
+"""
+
+from __future__ import annotations
+
+import atexit
+import functools
+import shutil
+import tempfile
+import zipfile
+from dataclasses import dataclass
+from pathlib import Path
+from urllib.parse import unquote, urlparse
+
+import fmpy
+from lxml import etree
+
+from .errors import UserError
+
+SSD_NS = "http://ssp-standard.org/SSP1/SystemStructureDescription"
+SSC_NS = "http://ssp-standard.org/SSP1/SystemStructureCommon"
+SSV_NS = "http://ssp-standard.org/SSP1/SystemStructureParameterValues"
+SSM_NS = "http://ssp-standard.org/SSP1/SystemStructureParameterMapping"
+RF_NS = "https://railfmu.org/ssp/1"
+OSP_NS = "http://opensimulationplatform.com/SSP/OSPAnnotations"
+NS = {"ssd": SSD_NS, "ssc": SSC_NS, "ssv": SSV_NS, "ssm": SSM_NS, "rf": RF_NS, "osp": OSP_NS}
+
+SCHEMA_DIR = Path(fmpy.__file__).parent / "ssp" / "schema"
+_SCHEMA_FILES = {"ssd": "SystemStructureDescription.xsd", "ssv": "SystemStructureParameterValues.xsd",
+                 "ssm": "SystemStructureParameterMapping.xsd"}
+# no DTDs, no entities, no network: an SSP is untrusted input
+_PARSER = etree.XMLParser(resolve_entities=False, no_network=True, load_dtd=False)
+
+
+def one_line(text: object) -> str:
+    return " ".join(str(text).split())
+
+
+def local(el) -> str:
+    """An element's tag without its namespace."""
+    return etree.QName(el).localname
+
+
+def children(el, ns: str | None = None):
+    """Element children (no comments), optionally of one namespace."""
+    return [c for c in el if isinstance(c.tag, str) and (ns is None or etree.QName(c).namespace == ns)]
+
+
+# -- the SSP root --------------------------------------------------------------------------
+
+@dataclass
+class Root:
+    given: Path  # what the caller passed
+    dir: Path  # the SSP root: relative URIs resolve here
+    ssd: Path
+    label: Path  # how ``dir`` is shown in messages
+
+    def show(self, path: Path) -> str:
+        try:
+            return str(self.label / path.relative_to(self.dir))
+        except ValueError:
+            return str(path)
+
+    def resolve(self, uri: str, where: str) -> Path:
+        """A relative (or ``file:``) URI of the SSD as a path; other schemes are not supported."""
+        parsed = urlparse(uri)
+        if parsed.scheme not in ("", "file"):
+            raise UserError(f"{where}: source {uri!r}: only relative and file: URIs are supported")
+        path = Path(unquote(parsed.path))
+        return path if path.is_absolute() else self.dir / path
+
+
+def locate(path) -> Root:
+    """The SSP root of a ``.ssd`` file, a folder holding ``SystemStructure.ssd``, or a ``.ssp``."""
+    given = Path(path)
+    if not given.exists():
+        raise UserError(f"{given}: no such file or directory")
+    if given.is_dir():
+        ssd = given / "SystemStructure.ssd"
+        if not ssd.is_file():
+            raise UserError(f"{given}: no SystemStructure.ssd in this folder")
+        return Root(given, given, ssd, given)
+    if given.suffix.lower() == ".ssd":
+        return Root(given, given.parent, given, given.parent)
+    if given.suffix.lower() == ".ssp" or zipfile.is_zipfile(given):
+        folder = _extract(given)
+        if not (folder / "SystemStructure.ssd").is_file():
+            raise UserError(f"{given}: no SystemStructure.ssd at the top of the archive")
+        return Root(given, folder, folder / "SystemStructure.ssd", given)
+    raise UserError(f"{given}: expected a .ssd file, a .ssp archive or a folder holding SystemStructure.ssd")
+
+
+_EXTRACTED: dict[tuple, Path] = {}
+
+
+def _extract(archive: Path) -> Path:
+    """Unpack a .ssp once per process (per version of the file); removed at exit, because the
+    FMU paths of the System point inside it."""
+    if not zipfile.is_zipfile(archive):
+        raise UserError(f"{archive}: not an SSP archive (not a ZIP file)")
+    st = archive.stat()
+    key = (archive.resolve(), st.st_mtime_ns, st.st_size)
+    if key in _EXTRACTED and _EXTRACTED[key].is_dir():
+        return _EXTRACTED[key]
+    folder = Path(tempfile.mkdtemp(prefix="railfmu-ssp-"))
+    atexit.register(shutil.rmtree, folder, True)
+    try:
+        with zipfile.ZipFile(archive) as zf:
+            zf.extractall(folder)  # zipfile drops '..' and absolute member names
+    except (zipfile.BadZipFile, zipfile.LargeZipFile, OSError, RuntimeError, ValueError) as exc:
+        raise UserError(f"{archive}: cannot unpack the SSP archive: {one_line(exc)}") from None
+    _EXTRACTED[key] = folder
+    return folder
+
+
+# -- XML and schema ------------------------------------------------------------------------
+
+@functools.cache
+def schema(kind: str) -> etree.XMLSchema:
+    return etree.XMLSchema(etree.parse(str(SCHEMA_DIR / _SCHEMA_FILES[kind])))
+
+
+def _short(message: str) -> str:
+    """lxml writes '{http://ssp-standard.org/...}Connection'; we write 'ssd:Connection'."""
+    for prefix, uri in NS.items():
+        message = message.replace("{" + uri + "}", prefix + ":")
+    return one_line(message)
+
+
+def schema_problems(el, kind: str, shown: str) -> list[str]:
+    """Every schema error of a document (or an inline ssv:ParameterSet/ssm:ParameterMapping),
+    as 'file:line: schema: message'. The SSD 1.0 schema takes inline parameter sets and
+    mappings as lax 'any' content, so those are checked against their own schemas here."""
+    s = schema(kind)
+    problems = []
+    if not s.validate(el):
+        problems += [f"{shown}:{e.line}: schema: {_short(e.message)}" for e in s.error_log]
+    if kind == "ssd":
+        for inline in el.iterfind(".//ssd:ParameterValues/ssv:ParameterSet", NS):
+            problems += schema_problems(inline, "ssv", shown)
+        for inline in el.iterfind(".//ssd:ParameterMapping/ssm:ParameterMapping", NS):
+            problems += schema_problems(inline, "ssm", shown)
+    return problems
+
+
+def parse_xml(file: Path, shown: str):
+    """The root element of an XML file; malformed or unreadable -> UserError."""
+    try:
+        return etree.parse(str(file), _PARSER).getroot()
+    except etree.XMLSyntaxError as exc:
+        raise UserError(f"{shown}:{exc.lineno}: malformed XML: {one_line(exc.msg)}") from None
+    except OSError as exc:
+        raise UserError(f"{shown}: cannot read: {one_line(exc.strerror or exc)}") from None
+
+
+def parse_checked(file: Path, kind: str, shown: str):
+    """Parse and validate against the SSP 1.0 schema of ``kind`` (ssd, ssv, ssm); the first
+    problem is raised as a one-line UserError."""
+    el = parse_xml(file, shown)
+    expected = {"ssd": (SSD_NS, "SystemStructureDescription"), "ssv": (SSV_NS, "ParameterSet"),
+                "ssm": (SSM_NS, "ParameterMapping")}[kind]
+    q = etree.QName(el)
+    if (q.namespace, q.localname) != expected:
+        raise UserError(f"{shown}:{el.sourceline}: expected an {kind}:{expected[1]} document "
+                        f"(namespace {expected[0]}), found {_short(el.tag)}")
+    problems = schema_problems(el, kind, shown)
+    if problems:
+        raise UserError(problems[0])
+    return el
