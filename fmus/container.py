@@ -46,6 +46,7 @@ import uuid
 import zipfile
 from pathlib import Path
 
+import fmpy
 import fmpy.container_fmu as fmpy_container
 from fmpy import read_model_description
 from fmpy.container_fmu import write_configuration
@@ -231,6 +232,48 @@ def write_container_dir(config: Configuration, unzipdir: Path, all_platforms: bo
     return unzipdir
 
 
+CACHE_KEEP = 16  # container folders kept in the cache (least recently used go first)
+
+
+def cached_container_dir(system: System) -> Path:
+    """The unzipped container FMU of ``system`` in the cache folder, written on first use.
+
+    Keyed by everything the container is written from (each component's FMU bytes and
+    parameter values, the connections, the recorded signals, the time grid, FMPy's
+    version and this module's source), so a repeated run (a study, a benchmark, the same
+    variant again) skips extracting the FMUs and deleting them afterwards: on this
+    machine's file system that cost more than stepping 20 s of the system."""
+    h = hashlib.sha256()
+    for c in system.components:
+        h.update(hashlib.sha256(Path(c.fmu).read_bytes()).digest())
+        h.update(repr((c.name, sorted((k, repr(v)) for k, v in c.parameters.items()))).encode())
+    h.update(repr([(c.src, c.src_var, c.dst, c.dst_var, c.factor, c.offset) for c in system.connections]).encode())
+    h.update(repr((system.name, system.record, system.start_time, system.stop_time, system.step_size)).encode())
+    h.update(repr((fmpy.__version__, _host_platform())).encode())
+    h.update(Path(__file__).read_bytes())
+    root = _cache_dir() / "containers"
+    target = root / h.hexdigest()[:20]
+    if not target.is_dir():
+        root.mkdir(parents=True, exist_ok=True)
+        tmp = root / f"{target.name}.{os.getpid()}.tmp"
+        shutil.rmtree(tmp, ignore_errors=True)
+        write_container_dir(configuration(system), tmp, all_platforms=False)
+        try:
+            os.replace(tmp, target)  # atomic: a concurrent run never sees half a folder
+        except OSError:  # another process got there first
+            shutil.rmtree(tmp, ignore_errors=True)
+        _prune(root)
+    os.utime(target)
+    return target
+
+
+def _prune(root: Path) -> None:
+    dirs = sorted((d for d in root.iterdir() if d.is_dir() and not d.name.endswith(".tmp")),
+                  key=lambda d: d.stat().st_mtime, reverse=True)
+    for d in dirs[CACHE_KEEP:]:
+        shutil.rmtree(d, ignore_errors=True)
+
+
 def build_container(system: System, out: Path) -> Path:
     """Write the container FMU of ``system`` to ``out`` (a ``.fmu`` with the container
     binaries of every platform fmpy ships); returns ``out``."""
@@ -263,12 +306,14 @@ def record_list(system: System, variables: dict[str, dict[str, ModelVariable]]) 
 
 class ContainerSlave(Slave):
     """The container FMU through :class:`Slave` (its logger, its error messages), loaded
-    from an unzipped folder (:func:`write_container_dir`), which :meth:`close` removes.
+    from an unzipped folder (:func:`write_container_dir`), which :meth:`close` removes
+    unless ``keep_dir`` (a cached folder).
     A failed instantiation (the container sets the parameters' start values there, so a
     refused parameter fails it) becomes a UserError with what the FMUs logged."""
 
-    def __init__(self, unzipdir: Path, instance_name: str):
-        self.path = Path(unzipdir).with_suffix(".fmu")  # for messages: "<system>.fmu (<name>)"
+    def __init__(self, unzipdir: Path, instance_name: str, keep_dir: bool = False):
+        self.keep_dir = keep_dir
+        self.path = Path(instance_name).with_suffix(".fmu")  # for messages: "<system>.fmu (<name>)"
         self.name = instance_name
         self.dir = str(unzipdir)
         self.md = read_model_description(self.dir)
@@ -284,6 +329,11 @@ class ContainerSlave(Slave):
             logged = "; ".join(m for s, _, m in self.messages if s in ("Error", "Fatal"))
             self.close()
             raise UserError(f"{self.path.name} ({instance_name}): instantiation failed: {logged or exc}") from None
+
+    def close(self) -> None:
+        if self.keep_dir:
+            self.dir = None  # Slave.close removes self.dir
+        super().close()
 
 
 # -- the C driver -------------------------------------------------------------------------

@@ -48,9 +48,7 @@ import contextlib
 import ctypes
 import heapq
 import math
-import shutil
 import sys
-import tempfile
 import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -460,10 +458,9 @@ def _run_python(system: System, master: str, sinks: Sequence[Sink], progress: bo
 def _run_container(system: System, sinks: Sequence[Sink], progress: bool) -> RunResult:
     from .container import (
         ContainerSlave,
-        configuration,
+        cached_container_dir,
         load_driver,
         record_list,
-        write_container_dir,
     )
 
     n = _n_steps(system)
@@ -471,14 +468,12 @@ def _run_container(system: System, sinks: Sequence[Sink], progress: bool) -> Run
     start, stop, h = system.start_time, system.stop_time, system.step_size
     wall0 = time.perf_counter()
     notes = ["container FMU (fmpy.container_fmu) couples like Jacobi: outputs copied after every step"]
-    work = Path(tempfile.mkdtemp(prefix="railfmu-run-"))
     slave = None
     opened: list[Sink] = []
     bar = _Progress(progress, start, stop)
     try:
-        unzipdir = write_container_dir(configuration(system), work / (system.name or "system"),
-                                       all_platforms=False)
-        slave = ContainerSlave(unzipdir, system.name or "system")
+        unzipdir = cached_container_dir(system)
+        slave = ContainerSlave(unzipdir, system.name or "system", keep_dir=True)
         names = {v.name: v for v in slave.md.modelVariables}
         record = record_list(system, {c.name: _variables(c.fmu) for c in system.components})
         columns = ["time", *record]
@@ -540,7 +535,6 @@ def _run_container(system: System, sinks: Sequence[Sink], progress: bool) -> Run
     finally:
         if slave is not None:
             slave.close()
-        shutil.rmtree(work, ignore_errors=True)
     for sink in opened:
         sink.close(True)
     return RunResult(columns, data, True, time.perf_counter() - wall0, "container", notes)

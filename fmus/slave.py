@@ -113,7 +113,8 @@ class Slave:
         except Exception:
             pass
         finally:
-            shutil.rmtree(self.dir, ignore_errors=True)
+            if self.dir is not None:
+                shutil.rmtree(self.dir, ignore_errors=True)
 
     def __enter__(self):
         return self
