@@ -29,6 +29,7 @@ test-slow: setup
 
 bench: build
 	$(BIN)/python benchmarks/step_cost.py
+	$(BIN)/python benchmarks/masters.py
 
 clean:
 	rm -rf build $(OUT) .pytest_cache
