@@ -20,11 +20,11 @@ sample period: a communication step shorter than ``T`` sees the same ``w_i(k)``;
 skips samples (the noise at a communication point does not depend on the step sizes that led
 there). ``w_i = 0`` when ``sigma_i = 0``. ``y_i`` depends directly on ``u_i`` only (declared
 in the ModelStructure). The 1e-9 keeps a communication point on the sample grid computed in
-floating point (``0.003 / 1e-3 = 2.9999999999999996``) in its sample, as the runtime's
+floating point (``2001 * 1e-3 / 1e-3 = 2000.9999999999998``) in its sample, as the runtime's
 ``time_close``.
 
 Inputs, outputs, sigma and bias carry no unit: the FMU is generic and connects to any Real
-output (an unit-less connector is never converted by the SSP reader, ``fmus/ssp_units.py``);
+output (a unit-less connector is never converted by the SSP reader, ``fmus/ssp_units.py``);
 ``sigma_i`` and ``bias_i`` are in the unit of what channel ``i`` carries, say which in the
 ``.ssv`` that sets them.
 
