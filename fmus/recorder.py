@@ -6,10 +6,28 @@ leaves a readable file; :class:`ArrayRecorder` keeps the rows in memory (tests, 
 
 from __future__ import annotations
 
+import contextlib
+import signal
+import threading
 import time
 from pathlib import Path
 
 import numpy as np
+
+
+@contextlib.contextmanager
+def _signals_held():
+    """Hold SIGINT/SIGTERM until the block is done (they arrive right after it). Main
+    thread on POSIX only; elsewhere a no-op."""
+    held = {signal.SIGINT, signal.SIGTERM}
+    if not hasattr(signal, "pthread_sigmask") or threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    old = signal.pthread_sigmask(signal.SIG_BLOCK, held)
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, old)
 
 
 class CsvRecorder:
@@ -60,13 +78,13 @@ class CsvRecorder:
 
     def _flush(self, now: float) -> None:
         if self._pending:
-            data = ("\n".join(self._pending) + "\n").encode()
-            view = memoryview(data)
-            while view:  # a raw write may be partial
-                view = view[self._file.write(view):]
-            self.rows_written += len(self._pending)
-            self.last_time = self._pending_last
-            self._pending.clear()
+            view = memoryview(("\n".join(self._pending) + "\n").encode())
+            with _signals_held():  # Ctrl-C mid-write would leave half a row, or write rows twice
+                while view:  # a raw write may be partial
+                    view = view[self._file.write(view):]
+                self.rows_written += len(self._pending)
+                self.last_time = self._pending_last
+                self._pending.clear()
         self._last_flush = now
 
     def close(self, complete: bool) -> None:

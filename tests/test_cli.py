@@ -157,3 +157,32 @@ def test_validate_reports_problems_of_a_broken_fmu(tmp_path):
     res = railfmu("validate", str(bad))
     assert res.returncode == 1
     assert "problems" in res.stdout
+
+
+def test_an_interrupted_run_keeps_complete_rows_and_says_so(tmp_path):
+    """Ctrl-C in the middle of the main job: exit 130, a message with the time reached and
+    the rows kept, and a signals.csv of complete rows only."""
+    import re
+    import signal
+    import time
+
+    out = tmp_path / "run"
+    proc = subprocess.Popen([sys.executable, "-m", "experiments.cli", "run", "track_wheelset", "--out", str(out)],
+                            stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 60
+    while time.monotonic() < deadline:  # wait until the run is well under way
+        f = out / "signals.csv"
+        if f.is_file() and f.stat().st_size > 200_000:
+            break
+        time.sleep(0.05)
+    proc.send_signal(signal.SIGINT)
+    _, stderr = proc.communicate(timeout=60)
+    assert proc.returncode == 130, stderr
+    m = re.search(r"interrupted at t = ([\d.]+) s; \S+ holds (\d+) complete rows", stderr)
+    assert m, stderr
+    rows = list(csv.reader(open(out / "signals.csv")))
+    header, body = rows[0], rows[1:]
+    assert len(body) == int(m.group(2)) and 100 < len(body) < 20001
+    assert all(len(r) == len(header) for r in body)
+    assert float(body[-1][0]) == pytest.approx(float(m.group(1)))
+    assert "Traceback" not in stderr
