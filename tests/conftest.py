@@ -1,6 +1,11 @@
-import pytest
+import os
 
-from fmus.build import build_all
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # as the CLI: small matrices, no BLAS threads
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+
+import pytest  # noqa: E402
+
+from fmus.build import build_all  # noqa: E402
 
 
 @pytest.fixture(scope="session")
