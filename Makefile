@@ -19,7 +19,7 @@ build: setup
 	$(BIN)/railfmu build
 
 run: build
-	$(BIN)/railfmu run track_wheelset --out $(OUT)/track_wheelset
+	$(BIN)/railfmu run suspension_fault --out $(OUT)/suspension_fault
 
 test: setup
 	$(BIN)/python -m pytest -q

@@ -3,7 +3,7 @@
 An experiment is a folder under ``experiments/`` with ``SystemStructure.ssd`` and
 ``variants/*.ssv``; its ``__init__.py`` may add plots (``PLOTS``), a default variant
 (``DEFAULT_VARIANT``), study metrics (``metrics(signals, estimates, base) -> dict``), its own
-figures (``plots(signals, estimates, out) -> [files]``), a report section
+figures (``plots(signals, estimates, out, metrics) -> [files]``), a report section
 (``report_md(metrics) -> str``) and a study table (``table_md(table) -> str``). ``railfmu run`` also accepts any SSP (a ``.ssp``
 archive, an ``.ssd`` file or a folder): then every recorded signal is plotted.
 """
@@ -147,7 +147,7 @@ def run_experiment(name: str, variant: str | None = None, out: Path | str | None
 
     plots = plot_signals(exp.module, signals, out) + plot_estimates(system, bank, signals, out)
     if exp.module is not None and hasattr(exp.module, "plots"):  # the study's own figures
-        plots += exp.module.plots(signals, estimates, out)
+        plots += exp.module.plots(signals, estimates, out, metrics)
     _report(exp, system, metrics, plots, out)
     print(f"wrote {out}/: signals.csv, estimates.csv, metrics.json, report.md, {', '.join(plots)}", file=log)
     return metrics

@@ -13,9 +13,10 @@ def all_models() -> list[Model]:
     from .sensors import SENSORS
     from .step_source import STEP_SOURCE
     from .track import TRACK
+    from .vehicle_lateral import VEHICLE_LATERAL
     from .wheelset import WHEELSET
 
-    return [TRACK, WHEELSET, COACH_VERTICAL, STEP_SOURCE, SENSORS]
+    return [TRACK, WHEELSET, COACH_VERTICAL, STEP_SOURCE, SENSORS, VEHICLE_LATERAL]
 
 
 __all__ = ["Input", "Model", "Output", "Parameter", "State", "Variable", "all_models"]

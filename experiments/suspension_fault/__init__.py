@@ -52,12 +52,31 @@ def metrics(signals: dict, estimates: dict, base: dict) -> dict:
             if f"{name}.k1" in estimates}
 
 
-def plots(signals: dict, estimates: dict, out: Path) -> list[str]:
-    """Seed 004 Fig. 3: both k1 estimates and the true k1 over time."""
+def plots(signals: dict, estimates: dict, out: Path, metrics: dict) -> list[str]:
+    """Seed 004 Fig. 3 (both k1 estimates and the true k1 over time); for ``step_response``
+    also Fig. 2 (the first 10 s of the 1 mm step under both bogies)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+
+    files = []
+    if metrics.get("variant") == "step_response":
+        ts = np.asarray(signals["time"])
+        n = np.searchsorted(ts, 10.0, side="right")
+        fig, ax = plt.subplots(figsize=(9, 3.6))
+        for sig, label, style in (("track.vertical_left_1", "rail height (both bogies)", "k--"),
+                                  ("coach.z_c", "coach bounce z_c", "C0"), ("coach.z_b2", "bogie 2 bounce z_b2", "C1")):
+            ax.plot(ts[:n], 1e3 * np.asarray(signals[sig])[:n], style, lw=1.2, label=label)
+        ax.set_xlabel("time [s]")
+        ax.set_ylabel("vertical displacement [mm]")
+        ax.set_title("1 mm vertical step under both bogies at t = 1 s (seed 004 Fig. 2)")
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=8)
+        fig.tight_layout()
+        fig.savefig(out / "step_response.png", dpi=110)
+        plt.close(fig)
+        files.append("step_response.png")
 
     t = np.asarray(estimates["time"])
     fig, ax = plt.subplots(figsize=(9, 3.6))
@@ -73,7 +92,7 @@ def plots(signals: dict, estimates: dict, out: Path) -> list[str]:
     fig.tight_layout()
     fig.savefig(out / "k1_estimates.png", dpi=110)
     plt.close(fig)
-    return ["k1_estimates.png"]
+    return [*files, "k1_estimates.png"]
 
 
 def _fmt(x, scale=1.0, digits=3) -> str:

@@ -1,0 +1,74 @@
+"""The suspension_fault experiment (seed 004) end to end through `railfmu`: SSD wiring (track
+under both bogies, the fault source into coach.k1, noisy sensors), both observers, metrics.json
+keys, and the improved estimator's targets. CI runs shortened variants; the full 150 s study
+is `slow`."""
+
+import json
+import subprocess
+import sys
+
+import pytest
+
+TARGET_REL_ERROR = 0.02  # issue 5: improved, final relative error, every variant
+TARGET_CONVERGENCE_S = 20.0  # static
+TARGET_DETECTION_S = 5.0  # step_fault
+KEYS = {"k1_true_final", "k1_est_final", "rel_error_final", "convergence_time_s"}
+
+
+def run(tmp_path, variant, *extra):
+    out = tmp_path / variant
+    res = subprocess.run([sys.executable, "-m", "experiments.cli", "run", "suspension_fault", "--variant", variant,
+                          "--out", str(out), *extra], capture_output=True, text=True)
+    assert res.returncode == 0, res.stderr
+    return json.loads((out / "metrics.json").read_text()), out
+
+
+@pytest.mark.parametrize("variant", ["static", "step_fault_no_noise"])
+def test_reduced_run_meets_the_improved_targets(tmp_path, variant):
+    metrics, out = run(tmp_path, variant, "--stop-time", "40")
+    for name in ("seed_wls", "improved"):
+        assert KEYS <= set(metrics[name])
+        assert ("detection_delay_s" in metrics[name]) == variant.startswith("step_fault")
+    imp = metrics["improved"]
+    truth = 215e3 if variant.startswith("step_fault") else 430e3
+    assert imp["k1_true_final"] == truth
+    assert imp["rel_error_final"] <= TARGET_REL_ERROR
+    if variant == "static":
+        assert imp["convergence_time_s"] <= TARGET_CONVERGENCE_S
+    else:
+        assert imp["detection_delay_s"] <= TARGET_DETECTION_S
+    # the seed's scheme runs and is reported, not held to the targets
+    assert metrics["seed_wls"]["k1_est_final"] > 0
+    for f in ("k1_estimates.png", "signals.csv", "estimates.csv", "report.md"):
+        assert (out / f).is_file()
+    assert "| improved |" in (out / "report.md").read_text()
+
+
+def test_noise_comes_from_the_sensors_fmu(tmp_path):
+    """With noise, the sensor output differs from the coach's true signal by ~0.01 m/s2 rms;
+    without, it is the coach's signal exactly."""
+    import csv
+
+    import numpy as np
+
+    for variant, expected in (("static", 0.01), ("static_no_noise", 0.0)):
+        _, out = run(tmp_path, variant, "--stop-time", "5")
+        rows = list(csv.DictReader(open(out / "signals.csv")))
+        diff = np.array([float(r["sensors.y_1"]) - float(r["coach.ddz_c"]) for r in rows])
+        assert np.sqrt(np.mean(diff ** 2)) == pytest.approx(expected, rel=0.1, abs=1e-15)
+
+
+@pytest.mark.slow
+def test_full_study_meets_every_target(tmp_path):
+    res = subprocess.run([sys.executable, "-m", "experiments.cli", "study", "suspension_fault", "--out",
+                          str(tmp_path)], capture_output=True, text=True)
+    assert res.returncode == 0, res.stderr
+    table = json.loads((tmp_path / "table.json").read_text())
+    for variant in ("static", "static_no_noise", "step_fault", "step_fault_no_noise"):
+        imp = table[variant]["improved"]
+        assert imp["rel_error_final"] <= TARGET_REL_ERROR, variant
+        if variant.startswith("static"):
+            assert imp["convergence_time_s"] <= TARGET_CONVERGENCE_S, variant
+        else:
+            assert imp["detection_delay_s"] <= TARGET_DETECTION_S, variant
+    assert "seed_wls" in (tmp_path / "table.md").read_text()
