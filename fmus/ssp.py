@@ -176,11 +176,12 @@ class _Reader:
                 self._set(comp, v)
         for v in self._bindings(self.system, ""):
             self._set(*self._split(v))
+        record, observers = self._annotations()
+        self.observers = {o.name: o for o in observers}
         if variant is not None:
             self._variant(variant)
         self._overrides(overrides)
         start, stop, step = self._time(*times, need=need_time)
-        record, observers = self._annotations()
         return System(name=self.doc.get("name") or self.system.get("name"),
                       components=[Component(c.name, c.fmu, dict(c.params)) for c in self.comps.values()],
                       connections=connections, start_time=start, stop_time=stop, step_size=step,
@@ -416,10 +417,24 @@ class _Reader:
             raise UserError(f"{file}: variant file not found")
         shown = self.root.show(file)
         for v in read_parameter_set(parse_checked(file, "ssv", shown), shown, self.ssd_units):
-            self._set(*self._split(v))
+            if not self._observer_setting(v.name, v.value):
+                self._set(*self._split(v))
+
+    def _observer_setting(self, name: str, value) -> bool:
+        """Our extension: a variant or ``--set`` name ``observer.setting`` (an observer of the
+        railfmu annotation, not a component) overrides that observer's setting, e.g. the
+        filter's conicity in a robustness variant. Other tools see no such component."""
+        obs, dot, setting = name.partition(".")
+        if not dot or obs in self.comps or obs not in self.observers:
+            return False
+        self.observers[obs].settings[setting] = _setting(str(value)) if isinstance(value, str) else value
+        return True
 
     def _overrides(self, overrides: dict) -> None:
         for cname, values in overrides.items():
+            values = {k: v for k, v in values.items() if not self._observer_setting(f"{cname}.{k}", v)}
+            if not values:
+                continue
             comp = self.comps.get(cname)
             if comp is None:
                 first = next(iter(values), "?")

@@ -487,3 +487,17 @@ def test_validate_ssp(fmu_dir, tmp_path):
     for f in fmu_dir.glob("*.fmu"):
         shutil.copy(f, folder / "resources")
     assert validate_ssp(folder) == []
+
+
+def test_variant_and_set_override_observer_settings(fmu_dir, tmp_path):
+    """Our extension: `observer.setting` in a variant or --set sets an observer's setting (the
+    filter's conicity in a robustness study); a component of that name would take precedence."""
+    ssv = tmp_path / "faster.ssv"
+    ssv.write_text(parameter_set("faster", real("alignment.V", 21) + integer("track.psd_level", 2)))
+    s = read_system(EXP, variant=str(ssv), fmu_dirs=[fmu_dir])
+    assert s.observers[0].settings == {"V": 21.0}
+    assert s.component("track").parameters["psd_level"] == 2
+    s = read_system(EXP, variant=str(ssv), fmu_dirs=[fmu_dir], overrides={"alignment": {"V": "22.5"}})
+    assert s.observers[0].settings == {"V": 22.5}
+    assert "no component 'filter'" in user_error(read_system, EXP, fmu_dirs=[fmu_dir],
+                                                 overrides={"filter": {"V": "1"}})
