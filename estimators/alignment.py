@@ -88,6 +88,14 @@ Seed eqs. 20-26: ``x^- = F x^+``, ``P^- = F P^+ F^T + Q_d``, ``K = P^- H^T (H P^
 The first sample is an update of the initial estimate ``x_a = 0`` (no prediction). A row with a
 non-finite measurement is skipped (predict only); the fixed-gain filter then keeps its gain.
 
+Smoother (offline, beyond the seed)
+-----------------------------------
+:meth:`AlignmentKalmanFilter.smooth` adds the Rauch-Tung-Striebel backward pass to the same
+forward filter: ``x^s_k = x^+_k + C_k (x^s_{k+1} - F x^+_k)``, ``C_k = P^+_k F^T (P^-_{k+1})^-1``;
+constant ``C`` from the stationary covariances for the fixed gain, filterpy's ``rts_smoother``
+for the time-varying filter. The filter's estimate of ``xi`` lags (it is causal and its
+bandwidth is set by the slow common-mode pinning); the smoother removes the lag.
+
 Observability (seed eq. 27): :meth:`AlignmentKalmanFilter.observability_rank` is the rank of
 ``control.obsv(F, H)``; 7 for the seed's parameters.
 
@@ -130,6 +138,15 @@ def sigma_virtual_from_spectrum(q_xi: float, V: float, dt: float) -> float:
     that puts the forgetting of the random walk ``q_xi`` (m^2/s) at the ERRI B176 corner
     ``Omega_r`` at speed ``V`` (m/s): ``sqrt(q_xi / dt) / (V Omega_r)``."""
     return math.sqrt(q_xi / dt) / (V * track.OMEGA_R)
+
+
+def _spd_inv(P: np.ndarray) -> np.ndarray:
+    """Inverse of a symmetric positive definite matrix whose diagonal spans many decades:
+    Cholesky of the correlation matrix ``D^-1 P D^-1`` (``D = sqrt(diag P)``), then rescaled."""
+    d = 1.0 / np.sqrt(np.diag(P))
+    corr = P * np.outer(d, d)
+    inv = sla.cho_solve(sla.cho_factor(0.5 * (corr + corr.T)), np.eye(P.shape[0]))
+    return inv * np.outer(d, d)
 
 
 def _as_bool(value: Any, name: str) -> bool:
@@ -229,6 +246,7 @@ class AlignmentKalmanFilter(Observer):
                 raise ValueError("AlignmentKalmanFilter: P0 needs 7 positive standard deviations")
             self.P0 = np.diag(np.square(std))
         self._zbuf = np.zeros(4)  # [ddy, dpsi, ddy_f, 0]: the virtual reading stays 0
+        self._C: np.ndarray | None = None  # stationary smoother gain, on first use
         self.reset()
 
     # -- Observer hooks ------------------------------------------------------------------------
@@ -259,6 +277,108 @@ class AlignmentKalmanFilter(Observer):
         if self.steady_state:
             return self._x.copy()
         return self._kf.x[:, 0].copy()
+
+    # -- offline smoothing --------------------------------------------------------------------
+    def smooth(self, t: np.ndarray, Z: np.ndarray) -> np.ndarray:
+        r"""Offline Rauch-Tung-Striebel smoother: times ``(n,)`` and measurements
+        ``(n, len(inputs))`` as for :meth:`run` -> smoothed estimates ``(n, len(outputs))`` of
+        the same outputs, each conditioned on the whole record (past *and* future). Beyond
+        seed 000, which filters only.
+
+        Forward pass: exactly :meth:`run` (the same hook calls in the same order, so the
+        filtered estimates are bit-identical; a dropped row is predicted over, a non-finite
+        row is predicted only), on the grid of every sample time ``dt`` from ``t[0]``, so a
+        gap of ``m`` steps contributes ``m - 1`` prediction-only grid points. Backward pass
+        (Rauch, Tung & Striebel, AIAA J. 3 (1965) 1445), from ``x^s_N = x^+_N``::
+
+            x^-_{k+1} = F x^+_k
+            x^s_k     = x^+_k + C_k (x^s_{k+1} - x^-_{k+1})
+            C_k       = P^+_k F^T (P^-_{k+1})^{-1},   P^-_{k+1} = F P^+_k F^T + Q_d
+
+        On a prediction-only grid point ``x^+_k = x^-_k``: the smoother passes through it.
+
+        * ``steady_state=True``: the stationary smoother of the fixed-gain filter, one constant
+          gain ``C = P^+ F^T (P^-)^{-1}`` with ``P^-`` the DARE solution (:attr:`P_prior`) and
+          ``P^+ = (I - K H) P^-`` (:attr:`P_post`, the Joseph form of the same). It is
+          exact where the filter is stationary, and like the fixed gain it ignores the
+          larger covariance after a skipped row. Computed as
+          ``x^s_k = (I - C F) x^+_k + C x^s_{k+1}``: the first term for all k at once, then a
+          loop of one 7x7 product per step.
+        * ``steady_state=False``: ``filterpy.kalman.KalmanFilter.rts_smoother`` on the
+          filtered means and covariances of every grid point (the time-varying ``C_k``).
+
+        ``(P^-)^{-1}`` is applied through the Cholesky factor of the correlation matrix
+        ``D^{-1} P^- D^{-1}`` (``D = sqrt(diag P^-)``): ``P^-`` spans ten decades (1e-15 to
+        1e-5, condition ~1e10), the correlation matrix far fewer.
+
+        Afterwards the filter stands where :meth:`run` would leave it (end of the record,
+        :attr:`steps` and :attr:`skipped` counted), and :attr:`last_filtered` holds the
+        forward estimates at the sample times (equal to what :meth:`run` returns)."""
+        t = np.asarray(t, dtype=float)
+        Z = np.asarray(Z, dtype=float)
+        if t.ndim != 1 or Z.shape != (t.shape[0], self._n_in):
+            raise ValueError(f"{type(self).__name__}.smooth: t {t.shape} and Z {Z.shape} do not match "
+                             f"(expected (n,) and (n, {self._n_in}))")
+        n = t.shape[0]
+        if n == 0:
+            return np.empty((0, len(self.outputs)))
+        gaps = [0] + [self._n_steps(float(t[k - 1]), float(t[k])) for k in range(1, n)]
+        ok = np.isfinite(Z).all(axis=1)
+        self.reset(float(t[0]))
+        n_grid = 1 + sum(gaps)
+        rows = np.cumsum(gaps)  # grid index of each sample
+        X = np.empty((n_grid, 7))
+        P = None if self.steady_state else np.empty((n_grid, 7, 7))
+        g = 0
+        if self.steady_state:
+            # _predict and _update inlined, operation for operation (the same products in the
+            # same order, so bit-identical to run; the hook calls cost half the time)
+            F, K, H, zb, x = self.F, self.K, self.H, self._zbuf, self._x
+            for k in range(n):
+                for i in range(gaps[k]):
+                    x = F @ x
+                    if i < gaps[k] - 1:  # a prediction-only grid point inside a gap
+                        X[g] = x
+                        g += 1
+                if ok[k]:
+                    zb[:3] = Z[k]
+                    x = x + K @ (zb - H @ x)
+                X[g] = x
+                g += 1
+            self._x = x
+        else:
+            kf = self._kf
+            for k in range(n):
+                for i in range(gaps[k]):
+                    self._predict()
+                    if i < gaps[k] - 1:
+                        X[g], P[g] = kf.x[:, 0], kf.P
+                        g += 1
+                if ok[k]:
+                    self._update(Z[k])
+                X[g], P[g] = kf.x[:, 0], kf.P
+                g += 1
+        self.steps, self.skipped, self._t = n, int(n - ok.sum()), float(t[-1])
+        #: the forward (filtered) estimates of the last smooth(), at the sample times
+        self.last_filtered = X[rows]
+
+        if self.steady_state:
+            C = self.smoother_gain
+            U = X @ (np.eye(7) - C @ self.F).T
+            Xs = np.empty_like(X)
+            Xs[-1] = X[-1]
+            for j in range(n_grid - 2, -1, -1):
+                Xs[j] = U[j] + C @ Xs[j + 1]
+        else:
+            Xs = self._kf.rts_smoother(X, P, inv=_spd_inv)[0]
+        return Xs[rows]
+
+    @property
+    def smoother_gain(self) -> np.ndarray:
+        """Stationary RTS gain ``C = P^+ F^T (P^-)^{-1}`` (see :meth:`smooth`)."""
+        if self._C is None:
+            self._C = self.P_post @ self.F.T @ _spd_inv(self.P_prior)
+        return self._C
 
     # -- diagnostics -------------------------------------------------------------------------
     @property

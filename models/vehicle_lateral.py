@@ -239,6 +239,27 @@ _BODY_NAME = {"c": "Car-body", "b1": "Bogie-frame 1 (leading)", "b2": "Bogie-fra
               "w1": "Wheelset 1 (leading)", "w2": "Wheelset 2", "w3": "Wheelset 3", "w4": "Wheelset 4"}
 
 
+class cbrt(sp.Function):  # noqa: N801 - named after the C function it prints as
+    """Real cube root that stays one function call: sympy's own ``x**(1/3)`` merges with
+    powers of the same base (``c**2`` -> ``x**(2/3)``), which C evaluates with pow()."""
+
+    nargs = 1
+
+    @classmethod
+    def eval(cls, x):
+        if x.is_Number:
+            return sp.Float(np.cbrt(float(x)))
+
+    def fdiff(self, argindex=1):
+        return 1 / (3 * cbrt(self.args[0]) ** 2)
+
+    def _ccode(self, printer):
+        return f"cbrt({printer._print(self.args[0])})"
+
+    def _numpycode(self, printer):
+        return f"{printer._module_format('numpy.cbrt')}({printer._print(self.args[0])})"
+
+
 def _sym(name: str) -> sp.Symbol:
     return sp.Symbol(name, real=True)
 
@@ -333,8 +354,9 @@ def build() -> Model:
         nu_sp = dq[f"psi_w{j}"] / V
         F_y, M_z = sp.S.Zero, sp.S.Zero
         for side, s in SIDES:
-            c = sp.Max(loads[j, side], 0) ** sp.Rational(1, 3) / Q0 ** sp.Rational(1, 3)  # (Q/Q0)^(1/3)
-            f11, f22, f23, f33 = p["f11"] * c**2, p["f22"] * c**2, p["f23"] * c**3, p["f33"] * c**4
+            r = sp.Max(loads[j, side], 0) / Q0  # load ratio (no tension in the contact)
+            c = cbrt(r)
+            f11, f22, f23, f33 = p["f11"] * c**2, p["f22"] * c**2, p["f23"] * r, p["f33"] * r * c
             nu_x = -s * (l * dq[f"psi_w{j}"] / V + alpha * e / r0)
             F_y += -f22 * nu_y - f23 * nu_sp
             M_z += -s * l * (-f11 * nu_x) + f23 * nu_y - f33 * nu_sp
