@@ -193,7 +193,7 @@ class AlignmentKalmanFilter(Observer):
     inputs: ClassVar[tuple[str, ...]] = ("ddy", "dpsi", "ddy_f")
     outputs: ClassVar[tuple[str, ...]] = STATES
     units: ClassVar[dict[str, str]] = {"ddy": "m/s2", "dpsi": "rad/s", "ddy_f": "m/s2",
-                                       **dict(zip(STATES, _STATE_UNITS))}
+                                       **dict(zip(STATES, _STATE_UNITS, strict=True))}
 
     # the filter's own settings and their defaults (None: derived, see the module docstring)
     _OWN: ClassVar[dict[str, Any]] = {
