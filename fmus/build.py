@@ -7,6 +7,7 @@ resources/. The GUID hashes the interface and the code, so an unchanged model is
 
 from __future__ import annotations
 
+import hashlib
 import html
 import os
 import shutil
@@ -71,15 +72,42 @@ def _guid_of_fmu(path: Path) -> str | None:
         return None
 
 
+def definition_key(model: Model) -> str:
+    """A hash of everything an FMU is generated from: the model definitions (models/, with
+    their data), the generator, the runtime and hand-written C, the compiler flags. Equal
+    keys give equal FMUs, so a build can be skipped without running the generator (sympy
+    takes ~15 s on the full-vehicle model)."""
+    h = hashlib.sha256(repr((model.identifier, CFLAGS, os.environ.get("CC", "gcc"))).encode())
+    roots = [HERE.parent / "models", RUNTIME_DIR, CSRC_DIR]
+    files = [f for r in roots for f in sorted(r.rglob("*")) if f.is_file() and "__pycache__" not in f.parts]
+    files += [HERE / "codegen.py", HERE / "build.py", HERE / "units.py"]
+    for f in files:
+        h.update(f.as_posix().encode())
+        h.update(f.read_bytes())
+    return h.hexdigest()
+
+
+def _key_file(target: Path) -> Path:
+    return target.with_name(f".{target.stem}.key")
+
+
 def build_fmu(model: Model, out_dir: Path | str = DEFAULT_OUT, force: bool = False) -> Path:
-    """Build ``<out_dir>/<identifier>.fmu``; returns its path. Skips the compiler when an FMU
-    with the same GUID is already there (unless ``force``)."""
+    """Build ``<out_dir>/<identifier>.fmu``; returns its path. Skips everything when the FMU
+    there was built from the same definitions (:func:`definition_key`), and the compiler when
+    an FMU with the same GUID is already there (unless ``force``)."""
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     target = out_dir / f"{model.identifier}.fmu"
+    key = definition_key(model)
+    key_file = _key_file(target)
+    if not force and target.exists() and key_file.is_file():
+        recorded_key, _, recorded_guid = key_file.read_text().partition(" ")
+        if recorded_key == key and _guid_of_fmu(target) == recorded_guid.strip():
+            return target
     guid, src = generate_sources(model)
     c_files = sorted(n for n in src if n.endswith(".c"))
     if not force and target.exists() and _guid_of_fmu(target) == guid:
+        key_file.write_text(f"{key} {guid}\n")
         return target
     with tempfile.TemporaryDirectory(prefix=f"railfmu-{model.identifier}-") as tmp:
         root = Path(tmp)
@@ -121,6 +149,7 @@ def build_fmu(model: Model, out_dir: Path | str = DEFAULT_OUT, force: bool = Fal
                     info.compress_type = zipfile.ZIP_DEFLATED
                     zf.writestr(info, path.read_bytes())
         tmp_fmu.replace(target)  # atomic: a reader never sees a half-written FMU
+    key_file.write_text(f"{key} {guid}\n")
     return target
 
 

@@ -114,15 +114,22 @@ on each wheelset (creep + normal + flange).
 
 Modes
 -----
-:func:`lateral_modes` returns the damped modes of the linearisation (frequency, damping
-ratio, description). With the defaults at 20 m/s, see ``tests/test_vehicle_lateral.py``
-and the module-level table in the report of issue 4.
+:func:`lateral_modes` returns the damped modes of the linearisation (:func:`state_matrix`,
+central differences of the model's own right-hand side; ``Model.linearize`` gives the same
+A symbolically but takes minutes). Defaults at V = 20 m/s (damped Hz, damping ratio):
+car body yaw 0.62 (0.71), lower sway 0.66 (0.32), bounce 1.07 (0.14), upper sway / roll
+1.23 (0.22), pitch 1.29 (0.19); wheelset kinematic modes, coupled with the car-body roll,
+1.51-1.64 (0.08-0.27), below Klingel's 1.78 Hz for a free wheelset because the primary yaw
+stiffness ties the wheelsets to the bogie frames; bogie bounce 7.2, pitch 8.2, roll 9.5.
+:func:`first_lateral_mode` (lowest lateral mode with damping ratio < 0.25) gives
+f1 = 1.23 Hz, a 16.3 m wavelength at 20 m/s (seed 000 §5.5: 1.277 Hz, 15.66 m). The linear
+critical speed with these parameters lies between 45 and 50 m/s (hunting of the wheelsets).
 """
 
 from __future__ import annotations
 
 import math
-from typing import Mapping
+from collections.abc import Mapping
 
 import numpy as np
 import sympy as sp
@@ -213,7 +220,7 @@ PARAMETERS = [
     Parameter("k_ar", "Anti-roll bar torsional stiffness, per bogie (car body vs bogie roll)", "N.m/rad",
               _scaled(2.5e6), source="assumed 2.5 MN m/rad (coach anti-roll bar) x s_m", min=0.0),
     # contact options and running conditions
-    Parameter("flange_contact", "Flange contact on (true) or off (false)", "", False, type="Boolean",
+    Parameter("flange_contact", "Flange contact: 0 off, 1 on", "", 0, type="Integer", min=0, max=1,
               source="seed 000 §3.2: flange contact can be simulated; off in seed 000's runs"),
     Parameter("k_fl", "Flange contact lateral stiffness (rail + contact)", "N/m", 1.823e7,
               source="Cooperrider's bogie model (True & Kaas-Petersen): k0 = 1.823e7 N/m", min=0.0),
@@ -239,7 +246,7 @@ _BODY_NAME = {"c": "Car-body", "b1": "Bogie-frame 1 (leading)", "b2": "Bogie-fra
               "w1": "Wheelset 1 (leading)", "w2": "Wheelset 2", "w3": "Wheelset 3", "w4": "Wheelset 4"}
 
 
-class cbrt(sp.Function):  # noqa: N801 - named after the C function it prints as
+class cbrt(sp.Function):  # named after the C function it prints as
     """Real cube root that stays one function call: sympy's own ``x**(1/3)`` merges with
     powers of the same base (``c**2`` -> ``x**(2/3)``), which C evaluates with pow()."""
 
@@ -287,7 +294,6 @@ def build() -> Model:
     rate_of = {v.symbol: u[v.rate] for v in inputs if v.rate}
     q = {n: _sym(n) for n in COORDS}
     dq = {n: _sym("d" + n) for n in COORDS}
-    qsyms = [q[n] for n in COORDS]
 
     def rate(expr):
         """d/dt of an expression linear in the coordinates and the rail inputs."""
@@ -435,53 +441,55 @@ def state_matrix(params: Mapping[str, float] | None = None, eps: float = 1e-7) -
     return A
 
 
-def _mode_name(v: np.ndarray) -> str:
-    """Describe a mode shape (complex amplitudes of the 23 coordinates) by kinetic-energy-like
-    shares (|amplitude|^2 times inertia): the dominant body and motion."""
+def _energy_shares(v: np.ndarray) -> dict[tuple[str, str], float]:
+    """Shares of a mode shape (complex amplitudes of the 23 coordinates) by (body group, motion),
+    weighted by the inertias (kinetic energy of the mode)."""
     pv = VEHICLE_LATERAL.default_parameters()
-    w = []
-    for n in COORDS:
+    shares: dict[tuple[str, str], float] = {}
+    for n, a in zip(COORDS, v):
         d, b = n.split("_")
-        key = {"y": "m", "z": "m", "phi": "Ix", "theta": "Iy", "psi": "Iz"}[d]
         if b.startswith("w"):
-            w.append(pv["m_w"] if d == "y" else pv["I_w"])
+            w, group = (pv["m_w"] if d == "y" else pv["I_w"]), "wheelsets"
         else:
-            w.append(pv[f"{key}_{'c' if b == 'c' else 'b'}"])
-    e = np.asarray(w) * np.abs(v) ** 2
-    e = e / e.sum()
-    groups = {}
-    for n, ei in zip(COORDS, e):
-        d, b = n.split("_")
-        body = "car body" if b == "c" else ("bogies" if b.startswith("b") else "wheelsets")
-        groups[body, d] = groups.get((body, d), 0.0) + ei
-    top = sorted(groups.items(), key=lambda kv: -kv[1])[:2]
-    return ", ".join(f"{body} {d} {share:.0%}" for (body, d), share in top)
+            key = {"y": "m", "z": "m", "phi": "Ix", "theta": "Iy", "psi": "Iz"}[d]
+            w, group = pv[f"{key}_{'c' if b == 'c' else 'b'}"], ("car body" if b == "c" else "bogies")
+        shares[group, d] = shares.get((group, d), 0.0) + w * abs(a) ** 2
+    total = sum(shares.values())
+    return {k: e / total for k, e in shares.items()}
 
 
-def lateral_modes(params: Mapping[str, float] | None = None) -> list[tuple[float, float, str]]:
-    """Oscillatory modes of the linearised vehicle, sorted by frequency:
-    (damped frequency |Im lambda| / 2 pi in Hz, damping ratio -Re lambda / |lambda|,
-    description: the two largest energy shares by body and motion). A mode is *lateral* when
-    its lateral motions (y, psi, phi) carry most of its energy: see :func:`first_lateral_mode`."""
+def _modes(params: Mapping[str, float] | None = None) -> list[tuple[float, float, str, float, float]]:
+    """(frequency, damping ratio, description, lateral share, wheelset share) of each pair."""
     lam, vec = np.linalg.eig(state_matrix(params))
     out = []
-    for k in np.flatnonzero(lam.imag > 1e-3 * np.abs(lam)):  # complex pairs, not split real ones
-        out.append((float(lam[k].imag / (2 * math.pi)), float(-lam[k].real / abs(lam[k])),
-                    _mode_name(vec[:N_DOF, k])))
+    for k in np.flatnonzero((lam.imag > 0) & (-lam.real < 0.99 * np.abs(lam))):  # not (nearly) real pairs
+        sh = _energy_shares(vec[:N_DOF, k])
+        top = sorted(sh.items(), key=lambda kv: -kv[1])[:2]
+        desc = ", ".join(f"{g} {d} {e:.0%}" for (g, d), e in top)
+        lateral = sum(e for (g, d), e in sh.items() if d in ("y", "phi", "psi"))
+        wheelsets = sum(e for (g, d), e in sh.items() if g == "wheelsets")
+        out.append((float(lam[k].imag / (2 * math.pi)), float(-lam[k].real / abs(lam[k])), desc, lateral,
+                    wheelsets))
     return sorted(out)
 
 
-def lateral_share(description: str) -> bool:
-    return not any(w in description.split(",")[0] for w in (" z ", " theta "))
+def lateral_modes(params: Mapping[str, float] | None = None) -> list[tuple[float, float, str]]:
+    """Oscillatory modes of the linearised vehicle (vertical ones included), sorted by
+    frequency: (damped frequency |Im lambda| / 2 pi in Hz, damping ratio -Re lambda / |lambda|,
+    description: the two largest kinetic-energy shares by body and motion). ``params`` may
+    change any parameter, e.g. ``V``."""
+    return [m[:3] for m in _modes(params)]
 
 
-def first_lateral_mode(params: Mapping[str, float] | None = None) -> tuple[float, float, str]:
-    """The lowest-frequency oscillatory mode whose dominant motion is lateral, yaw or roll
-    (f1 of seed 000 §5.5, whose wavelength V / f1 is the resonance case)."""
-    return next(m for m in lateral_modes(params) if lateral_share(m[2]))
+def first_lateral_mode(params: Mapping[str, float] | None = None,
+                       max_damping: float = 0.25) -> tuple[float, float, str]:
+    """f1 of seed 000 §5.5 (its resonance wavelength is V / f1): the lowest-frequency lightly
+    damped (damping ratio below ``max_damping``) mode whose energy is mostly lateral, yaw or
+    roll."""
+    return next(m[:3] for m in _modes(params) if m[3] > 0.5 and m[1] < max_damping)
 
 
 def kinematic_mode(params: Mapping[str, float] | None = None) -> tuple[float, float, str]:
-    """The wheelsets' kinematic (hunting) mode: the least damped mode dominated by wheelset motion."""
-    cands = [m for m in lateral_modes(params) if m[2].startswith("wheelsets")]
-    return min(cands, key=lambda m: m[1])
+    """The wheelsets' kinematic mode: the oscillatory mode with the largest energy share in
+    wheelset motion (lateral + yaw)."""
+    return max(_modes(params), key=lambda m: m[4])[:3]
