@@ -113,6 +113,8 @@ axle_position_1..4          m        0, 2.5,   ERRI B176 coach: bogie pivots 2 a
                                      19, 21.5  (seed 004 Table 1), bogie wheelbase 2.5 m
 psd_level                   (int)    1         0 none, 1 ERRI B176 low, 2 high
 psd_scale                   ""       1         amplitude factor
+psd_lateral_scale           ""       1         extra factor on the random alignment
+psd_vertical_scale          ""       1         extra factor on the random vertical/cross-level
 lambda_min, lambda_max      m        1, 300    wavelength band of the random lines
 period_length               m        5000      L: the random profile repeats after it
 grid_step                   m        0.05      upper bound of the FMU's tabulation step
@@ -241,6 +243,8 @@ def check_track_parameters(p: Mapping[str, float]) -> None:
     need(p["V"] >= 0, "V", ">= 0")
     need(p["psd_level"] in (0, 1, 2), "psd_level", "0, 1 or 2")
     need(p["psd_scale"] >= 0, "psd_scale", ">= 0")
+    need(p["psd_lateral_scale"] >= 0, "psd_lateral_scale", ">= 0")
+    need(p["psd_vertical_scale"] >= 0, "psd_vertical_scale", ">= 0")
     need(p["lambda_min"] > 0, "lambda_min", "> 0")
     need(p["lambda_max"] > p["lambda_min"], "lambda_max", f"> lambda_min = {float(p['lambda_min']):g}")
     need(p["period_length"] > 0, "period_length", "> 0")
@@ -293,7 +297,8 @@ def spectral_lines(p: Mapping[str, float]) -> SpectralLines:
     else:
         S = np.array([psd_alignment(omega, level), psd_vertical(omega, level),
                       psd_crosslevel(omega, level, p["half_contact_width"])])
-    amplitude = p["psd_scale"] * np.sqrt(2.0 * S * d_omega)
+    channel = np.array([p["psd_lateral_scale"], p["psd_vertical_scale"], p["psd_vertical_scale"]])
+    amplitude = p["psd_scale"] * channel[:, None] * np.sqrt(2.0 * S * d_omega)
     phase = 2.0 * math.pi * SplitMix64(p["seed"]).uniforms(3 * k.size).reshape(3, k.size)
     return SpectralLines(k=k, omega=omega, amplitude=amplitude, phase=phase)
 
@@ -609,6 +614,12 @@ TRACK = Model(
                   type="Integer", min=0, max=2, source=_B176),
         Parameter("psd_scale", "factor on the random amplitudes (PSD times its square)", unit="",
                   start=1.0, min=0.0, source="choice"),
+        Parameter("psd_lateral_scale", "extra factor on the random alignment only (0: no random "
+                  "alignment, e.g. a harmonic-only lateral case)", unit="", start=1.0, min=0.0,
+                  source="choice (seed 000 sec. 5.4-5.5 cases)"),
+        Parameter("psd_vertical_scale", "extra factor on the random vertical profile and cross-level "
+                  "(0: no vertical irregularity; the alignment keeps its phases)", unit="", start=1.0,
+                  min=0.0, source="choice (seed 000 sec. 5.4, 'no vertical irregularities')"),
         Parameter("lambda_min", "shortest wavelength of the random lines (> 0)", unit="m", start=1.0,
                   positive=True,
                   source="choice: covers EN 13848 band D1 (3-25 m) and vehicle response"),

@@ -332,3 +332,26 @@ def test_profile_from_the_fmu_resources(fmu_dir):
     assert res["alignment_1"].max() == pytest.approx(4e-3, rel=1e-6)
     assert t[np.argmax(res["alignment_1"])] == pytest.approx(2.75, abs=1e-3)
     assert t[np.argmax(res["alignment_3"])] == pytest.approx(2.75 + 19.0 / 20.0, abs=1e-3)
+
+
+def test_channel_scales_switch_one_channel_and_keep_the_others(fmu_dir):
+    """psd_vertical_scale = 0: no vertical irregularity, the same alignment (the phases of every
+    channel are drawn regardless); psd_lateral_scale = 0: the reverse. FMU and Python alike."""
+    base = {"psd_level": 1, "seed": 5, "V": 20.0}
+    names = ["alignment_1", "vertical_left_1", "vertical_right_1"]
+
+    def fmu(extra):
+        res = simulate_fmu(str(fmu_dir / "TrackIrregularity.fmu"), start_values={**base, **extra}, stop_time=2.0,
+                           output_interval=0.01, output=names)
+        return {n: np.asarray(res[n]) for n in names}
+
+    ref, no_vert, no_lat = fmu({}), fmu({"psd_vertical_scale": 0.0}), fmu({"psd_lateral_scale": 0.0})
+    assert np.ptp(ref["vertical_left_1"]) > 1e-4 and np.ptp(ref["alignment_1"]) > 1e-4
+    np.testing.assert_array_equal(no_vert["alignment_1"], ref["alignment_1"])
+    assert not no_vert["vertical_left_1"].any() and not no_vert["vertical_right_1"].any()
+    np.testing.assert_array_equal(no_lat["vertical_left_1"], ref["vertical_left_1"])
+    assert not no_lat["alignment_1"].any()
+    t = np.arange(0, 2.0 + 1e-9, 0.01)
+    py = TrackIrregularity({**base, "psd_vertical_scale": 0.0}).outputs(t)
+    np.testing.assert_allclose(py["alignment_1"], ref["alignment_1"], atol=1e-8)
+    assert not np.asarray(py["vertical_left_1"]).any()

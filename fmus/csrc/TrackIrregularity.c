@@ -148,6 +148,10 @@ static void fft_inverse(double *z, const double *w, long M) {
 static int build_random(ModelInstance *m, TrackData *d) {
     const int level = m->i[VRI_psd_level];
     const double L = m->r[VR_period_length], scale = m->r[VR_psd_scale];
+    /* alignment, vertical profile, cross-level: the phases are drawn for every channel, so a
+       channel's scale changes nothing in the others */
+    const double channel_scale[3] = {m->r[VR_psd_lateral_scale], m->r[VR_psd_vertical_scale],
+                                     m->r[VR_psd_vertical_scale]};
     const double b = m->r[VR_half_contact_width], d_omega = 2.0 * PI / L;
     double k_lo, k_hi;
     long M, k, n, n_lines;
@@ -187,7 +191,7 @@ static int build_random(ModelInstance *m, TrackData *d) {
         memset(z, 0, sizeof(double) * 2 * (size_t)M);
         for (k = (long)k_lo; k < (long)k_lo + n_lines; k++) {
             const double omega = (double)k * d_omega;
-            const double a = scale * sqrt(2.0 * psd_channel(c, level, omega, b) * d_omega);
+            const double a = scale * channel_scale[c] * sqrt(2.0 * psd_channel(c, level, omega, b) * d_omega);
             const double phi = 2.0 * PI * splitmix64_uniform(&rng);
             const double xr = 0.5 * a * cos(phi), xi = 0.5 * a * sin(phi);
             z[2 * k] = xr * (1.0 - omega);       /* X + i (i Omega X) = X (1 - Omega) */
@@ -453,6 +457,7 @@ int model_check_parameters(ModelInstance *m) {
         {"V", VR_V}, {"s_start", VR_s_start}, {"axle_position_1", VR_axle_position_1},
         {"axle_position_2", VR_axle_position_2}, {"axle_position_3", VR_axle_position_3},
         {"axle_position_4", VR_axle_position_4}, {"psd_scale", VR_psd_scale},
+        {"psd_lateral_scale", VR_psd_lateral_scale}, {"psd_vertical_scale", VR_psd_vertical_scale},
         {"lambda_min", VR_lambda_min}, {"lambda_max", VR_lambda_max},
         {"period_length", VR_period_length}, {"grid_step", VR_grid_step},
         {"half_contact_width", VR_half_contact_width},
@@ -469,6 +474,8 @@ int model_check_parameters(ModelInstance *m) {
     CHECK(m->i[VRI_psd_level] >= 0 && m->i[VRI_psd_level] <= 2, "psd_level", m->i[VRI_psd_level],
           "0, 1 or 2");
     CHECK(r[VR_psd_scale] >= 0, "psd_scale", r[VR_psd_scale], ">= 0");
+    CHECK(r[VR_psd_lateral_scale] >= 0, "psd_lateral_scale", r[VR_psd_lateral_scale], ">= 0");
+    CHECK(r[VR_psd_vertical_scale] >= 0, "psd_vertical_scale", r[VR_psd_vertical_scale], ">= 0");
     CHECK(r[VR_lambda_min] > 0, "lambda_min", r[VR_lambda_min], "> 0");
     if (!(r[VR_lambda_max] > r[VR_lambda_min])) {
         model_error(m, "parameter lambda_max = %g must be > lambda_min = %g", r[VR_lambda_max],
