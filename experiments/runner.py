@@ -134,6 +134,7 @@ def run_experiment(name: str, variant: str | None = None, out: Path | str | None
         "wall_time_s": result.wall_time_s,
         "realtime_factor": (system.stop_time - system.start_time) / result.wall_time_s,
         "parameters": {c.name: c.parameters for c in system.components},
+        "observer_settings": {o.name: o.settings for o in system.observers},
         "rms": {k: float(np.sqrt(np.mean(v ** 2))) for k, v in signals.items() if k != "time"},
         "observers": bank.metrics(signals),
         "warnings": system.warnings,
