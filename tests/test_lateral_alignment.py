@@ -1,0 +1,83 @@
+"""The lateral_alignment experiment (seed 000) end to end through `railfmu`: complete vehicle
+model -> sensors -> alignment filter and smoother, metrics.json keys, and the study's
+properties on a shorter track (CI); the full 400 m study is `slow`.
+
+Measured on the full study (20 s, 400 m; J_rel filter / smoother): standard whole 0.23 / 0.14,
+D1 0.19 / 0.25, D2 0.23 / 0.13, D3 0.39 / 0.12; all_conditions whole 0.27; resonance_case2
+J = 0.15 mm. Seed 000: 0.25, 0.48, 0.26, 0.15; 0.32; 0.21 mm.
+"""
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from models.vehicle_lateral import first_lateral_mode
+
+EXP = Path(__file__).resolve().parents[1] / "experiments" / "lateral_alignment"
+BANDS = {"whole", "D1", "D2", "D3"}
+
+
+def run(tmp_path, variant, *extra):
+    out = tmp_path / variant
+    res = subprocess.run([sys.executable, "-m", "experiments.cli", "run", "lateral_alignment", "--variant", variant,
+                          "--master", "container", "--out", str(out), *extra], capture_output=True, text=True)
+    assert res.returncode == 0, res.stderr
+    return json.loads((out / "metrics.json").read_text()), out
+
+
+def test_reduced_standard_run(tmp_path):
+    """10 s (200 m) of the standard condition: every metric the issue names, rank 7, the filter
+    within a loose bound of the seed's whole-range J_rel, the smoother better over the whole
+    range and at long wavelengths."""
+    m, out = run(tmp_path, "standard", "--stop-time", "10")
+    for key in ("J_mm", "J_rel", "J_mm_smoothed"):
+        assert set(m[key]) == BANDS
+    assert m["observability_rank"] == 7
+    assert m["simulated_seconds"] == 10.0 and m["estimator_seconds"] > 0
+    assert 0.8 < m["alignment_rms_3_200_mm"] < 2.0  # ~1.4 mm over 3-200 m (psd_scale)
+    assert m["J_rel"]["whole"] <= 0.4  # seed: 0.25 over 400 m
+    assert m["J_rel_smoothed"]["whole"] < m["J_rel"]["whole"]
+    assert m["J_rel_smoothed"]["D3"] < m["J_rel"]["D3"]
+    for f in ("alignment.png", "alignment_bands.png", "sensors.png", "estimates_smoothed.csv", "report.md"):
+        assert (out / f).is_file(), f
+    report = (out / "report.md").read_text()
+    assert "Identification" in report and "seed 000" in report
+
+
+def test_resonance_wavelength_is_v_over_f1_of_the_complete_model():
+    f1 = first_lateral_mode()[0]
+    text = (EXP / "variants" / "resonance_case2.ssv").read_text()
+    assert f'name="track.harmonic_wavelength"><ssv:Real value="{20.0 / f1!r}"' in text
+    assert 1.0 < f1 < 1.5  # seed: 1.277 Hz
+
+
+def test_robustness_variants_change_the_filter_or_the_vehicle_as_the_seed_says(fmu_dir):
+    from fmus.ssp import read_system
+
+    def system(v):
+        return read_system(EXP, variant=v, fmu_dirs=[fmu_dir])
+
+    assert system("conicity_minus10").observers[0].settings["alpha"] == 0.09  # the filter's conicity
+    assert "alpha" not in system("conicity_minus10").component("vehicle").parameters  # not the vehicle's
+    assert system("kalker_minus50").component("vehicle").parameters["f22"] == 2.5e6
+    assert system("no_vertical").component("track").parameters["psd_vertical_scale"] == 0.0
+    assert system("no_noise").component("sensors").parameters["enabled"] is False
+
+
+@pytest.mark.slow
+def test_full_study(tmp_path):
+    res = subprocess.run([sys.executable, "-m", "experiments.cli", "study", "lateral_alignment", "--master",
+                          "container", "--out", str(tmp_path)], capture_output=True, text=True)
+    assert res.returncode == 0, res.stderr
+    t = json.loads((tmp_path / "table.json").read_text())
+    std = t["standard"]
+    assert std["J_rel"]["whole"] <= 0.25 and std["J_rel"]["D1"] <= 0.48 and std["J_rel"]["D2"] <= 0.26
+    assert t["all_conditions"]["J_rel"]["whole"] <= 0.32
+    assert t["resonance_case2"]["J_mm"]["whole"] <= 0.21
+    for band in ("whole", "D2", "D3"):
+        assert std["J_rel_smoothed"][band] < std["J_rel"][band], band
+    # not met yet (issue 4 stays open): the filter's D3 (0.39 against 0.15) and the smoother's D1
+    assert std["J_rel"]["D3"] < 0.5
