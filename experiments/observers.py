@@ -10,7 +10,6 @@ run goes, like ``signals.csv``.
 
 from __future__ import annotations
 
-import csv
 import importlib
 import math
 from pathlib import Path
@@ -18,6 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from fmus.errors import UserError
+from fmus.recorder import CsvRecorder
 from fmus.system import ObserverSpec, System
 
 
@@ -51,8 +51,7 @@ class ObserverBank:
         where = str(system.source or system.name)
         self.specs = system.observers
         self.observers = [make_observer(s, system.step_size, where) for s in self.specs]
-        self.out_csv = out_csv
-        self._file = None
+        self.recorder = CsvRecorder(out_csv) if out_csv is not None else None
         self.times: list[float] = []
         self.estimates: list[np.ndarray] = []  # one (n_outputs_total,) row per sample
 
@@ -62,20 +61,15 @@ class ObserverBank:
 
     def open(self, columns: list[str]) -> None:
         self._index = []
-        for spec in self.specs:
+        for spec, obs in zip(self.specs, self.observers):
             try:
-                self._index.append([columns.index(spec.inputs[k]) for k in self._inputs(spec)])
+                self._index.append([columns.index(spec.inputs[k]) for k in obs.inputs])
             except ValueError:
                 raise UserError(f"Observer {spec.name!r}: an input signal is not recorded") from None
         for obs in self.observers:
             obs.reset(0.0)
-        if self.out_csv is not None:
-            self._file = open(self.out_csv, "w", newline="")  # noqa: SIM115 (open for the whole run)
-            self._writer = csv.writer(self._file)
-            self._writer.writerow(["time", *self.columns])
-
-    def _inputs(self, spec: ObserverSpec) -> tuple[str, ...]:
-        return self.observers[self.specs.index(spec)].inputs
+        if self.recorder is not None:  # the same writer as signals.csv: complete rows, as it goes
+            self.recorder.open(["time", *self.columns])
 
     def write(self, row: np.ndarray) -> None:
         t = float(row[0])
@@ -83,17 +77,16 @@ class ObserverBank:
             if self.observers else np.empty(0)
         self.times.append(t)
         self.estimates.append(est)
-        if self._file is not None:
-            self._writer.writerow([repr(t), *(repr(float(v)) for v in est)])
+        if self.recorder is not None:
+            self.recorder.write(np.concatenate(([t], est)))
 
     def write_block(self, rows: np.ndarray) -> None:
         for row in rows:
             self.write(row)
 
     def close(self, complete: bool) -> None:
-        if self._file is not None:
-            self._file.close()
-            self._file = None
+        if self.recorder is not None:
+            self.recorder.close(complete)
 
     def arrays(self) -> tuple[np.ndarray, np.ndarray]:
         t = np.asarray(self.times)

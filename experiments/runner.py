@@ -2,10 +2,12 @@
 
 An experiment is a folder under ``experiments/`` with ``SystemStructure.ssd`` and
 ``variants/*.ssv``; its ``__init__.py`` may add plots (``PLOTS``), a default variant
-(``DEFAULT_VARIANT``), study metrics (``metrics(signals, estimates, base) -> dict``), its own
+(``DEFAULT_VARIANT``), study metrics (``metrics(signals, estimates, base) -> dict``; it may add
+offline estimates, e.g. a smoother's, to ``estimates`` for the figures), its own
 figures (``plots(signals, estimates, out, metrics) -> [files]``), a report section
-(``report_md(metrics) -> str``) and a study table (``table_md(table) -> str``). ``railfmu run`` also accepts any SSP (a ``.ssp``
-archive, an ``.ssd`` file or a folder): then every recorded signal is plotted.
+(``report_md(metrics) -> str``) and a study table (``table_md(table) -> str``).
+``railfmu run`` also accepts any SSP (a ``.ssp`` archive, an ``.ssd`` file or a folder):
+then every recorded signal is plotted.
 """
 
 from __future__ import annotations

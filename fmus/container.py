@@ -65,7 +65,7 @@ from fmpy.model_description import (
 
 from .errors import UserError
 from .slave import Slave
-from .system import System
+from .system import System, recorded_signals
 
 DRIVER_SOURCE = Path(__file__).parent / "runtime" / "container_driver.c"
 
@@ -159,7 +159,7 @@ def configuration(system: System) -> Configuration:
                                description=inner.description)
             mappings[cv] = [(components[comp.name], inner)]
             by_name[cv.name] = cv
-    for signal in record_list(system, variables):
+    for signal in recorded_signals(system, variables):
         comp, name = signal.split(".", 1)
         inner = var(comp, name)
         if inner.type != "Real":
@@ -293,17 +293,6 @@ def build_container(system: System, out: Path) -> Path:
     return out
 
 
-def record_list(system: System, variables: dict[str, dict[str, ModelVariable]]) -> list[str]:
-    """The recorded signals: ``system.record``, or every Real output in component order."""
-    if system.record:
-        for signal in system.record:
-            if "." not in signal:
-                raise UserError(f"recorded signal {signal!r}: expected component.variable")
-        return list(system.record)
-    return [f"{c.name}.{v.name}" for c in system.components for v in variables[c.name].values()
-            if v.causality == "output" and v.type == "Real"]
-
-
 class ContainerSlave(Slave):
     """The container FMU through :class:`Slave` (its logger, its error messages), loaded
     from an unzipped folder (:func:`write_container_dir`), which :meth:`close` removes
@@ -326,9 +315,9 @@ class ContainerSlave(Slave):
         try:
             self.fmu.instantiate(callbacks=self._callbacks)
         except Exception as exc:  # noqa: BLE001 (FMPy raises a bare Exception)
-            logged = "; ".join(m for s, _, m in self.messages if s in ("Error", "Fatal"))
+            error = self.failure("instantiation", exc)
             self.close()
-            raise UserError(f"{self.path.name} ({instance_name}): instantiation failed: {logged or exc}") from None
+            raise error from None
 
     def close(self) -> None:
         if self.keep_dir:

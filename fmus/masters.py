@@ -57,8 +57,8 @@ from pathlib import Path
 import numpy as np
 
 from .errors import UserError
-from .slave import FMUError, Slave
-from .system import Connection, Sink, System
+from .slave import Slave
+from .system import Connection, Sink, System, recorded_signals
 
 MASTERS = ("jacobi", "gauss-seidel", "container")
 BLOCK_ROWS = 1000  # container path: rows per C call / per write_block
@@ -248,9 +248,7 @@ class _Fmu:
         self.do_step.restype = ctypes.c_int
 
     def fail(self, what: str, status: int):
-        logged = "; ".join(m for s, _, m in self.slave.messages if s in ("Error", "Fatal"))
-        return FMUError(f"{self.slave.path.name} ({self.slave.name}): {what} failed: "
-                        f"{logged or f'status {status}'}")
+        return self.slave.failure(what, f"status {status}")
 
 
 class _Link:
@@ -335,16 +333,6 @@ class _Sampler:
         self.count = k + 1
 
 
-def _record(system: System, slaves: dict[str, Slave]) -> list[str]:
-    if system.record:
-        for signal in system.record:
-            if "." not in signal:
-                raise UserError(f"recorded signal {signal!r}: expected component.variable")
-        return list(system.record)
-    return [f"{n}.{v.name}" for n, s in slaves.items() for v in s.md.modelVariables
-            if v.causality == "output" and v.type == "Real"]
-
-
 def _run_python(system: System, master: str, sinks: Sequence[Sink], progress: bool) -> RunResult:
     n = _n_steps(system)
     _check_names(system)
@@ -377,7 +365,7 @@ def _run_python(system: System, master: str, sinks: Sequence[Sink], progress: bo
         else:
             transfer = list(system.connections)
         links = _links(transfer, fmus)
-        record = _record(system, slaves)
+        record = recorded_signals(system, {n: s.vars for n, s in slaves.items()})
         columns = ["time", *record]
         data = np.empty((n + 1, len(columns)))
         sampler = _Sampler(record, fmus, data)
@@ -460,7 +448,6 @@ def _run_container(system: System, sinks: Sequence[Sink], progress: bool) -> Run
         ContainerSlave,
         cached_container_dir,
         load_driver,
-        record_list,
     )
 
     n = _n_steps(system)
@@ -475,7 +462,7 @@ def _run_container(system: System, sinks: Sequence[Sink], progress: bool) -> Run
         unzipdir = cached_container_dir(system)
         slave = ContainerSlave(unzipdir, system.name or "system", keep_dir=True)
         names = {v.name: v for v in slave.md.modelVariables}
-        record = record_list(system, {c.name: _variables(c.fmu) for c in system.components})
+        record = recorded_signals(system, {c.name: _variables(c.fmu) for c in system.components})
         columns = ["time", *record]
         vrs = (ctypes.c_uint * len(record))(*[names[s].valueReference for s in record])
         nvr = len(record)

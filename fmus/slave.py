@@ -58,14 +58,18 @@ class Slave:
         return cb
 
     # -- calls that turn a failed status into an error with the FMU's own words --------------
+    def failure(self, what: str, fallback, since: int = 0) -> FMUError:
+        """``X.fmu (name): what failed: <the errors the FMU logged since message ``since``>``
+        (``fallback`` when it logged none): the one wording of every FMU call error."""
+        logged = "; ".join(m for s, _, m in self.messages[since:] if s in ("Error", "Fatal"))
+        return FMUError(f"{self.path.name} ({self.name}): {what} failed: {logged or fallback}")
+
     def call(self, what: str, fn, *args):
         n = len(self.messages)
         try:
             return fn(*args)
         except FMICallException as exc:
-            logged = "; ".join(m for s, _, m in self.messages[n:] if s in ("Error", "Fatal"))
-            raise FMUError(f"{self.path.name} ({self.name}): {what} failed: "
-                           f"{logged or exc}") from None
+            raise self.failure(what, exc, since=n) from None
 
     def var(self, name: str):
         try:

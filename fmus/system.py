@@ -82,6 +82,20 @@ class System:
         return round((self.stop_time - self.start_time) / self.step_size)
 
 
+def recorded_signals(system: System, variables: dict[str, dict]) -> list[str]:
+    """``system.record``, or every Real output of every component in component order;
+    ``variables`` maps component names to their FMU variables by name."""
+    from .errors import UserError
+
+    if system.record:
+        for signal in system.record:
+            if "." not in signal:
+                raise UserError(f"recorded signal {signal!r}: expected component.variable")
+        return list(system.record)
+    return [f"{c.name}.{v.name}" for c in system.components for v in variables[c.name].values()
+            if v.causality == "output" and v.type == "Real"]
+
+
 class Sink(Protocol):
     """Receives the recorded samples of a run: the CSV recorder, observers.
 

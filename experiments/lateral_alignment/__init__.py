@@ -78,6 +78,7 @@ def metrics(signals: dict, estimates: dict, base: dict) -> dict:
     t0 = time.perf_counter()
     smoothed = kf.smooth(t, Z)
     smoother_seconds = time.perf_counter() - t0
+    estimates["alignment.xi_smoothed"] = smoothed[:, xi]  # for plots(), which runs next
     f = alignment_errors(online, truth, V, dt, skip_s=START_UP_S)
     s = alignment_errors(smoothed[:, xi], truth, V, dt, skip_s=START_UP_S)
     whole_run = alignment_errors(online, truth, V, dt)
@@ -107,9 +108,7 @@ def plots(signals: dict, estimates: dict, out: Path, metrics: dict) -> list[str]
     s = np.asarray(signals["track.position"])
     truth = np.asarray(signals["track.alignment_1"])
     est = np.asarray(estimates["alignment.xi"])
-    Z = np.column_stack([signals[c] for c in SENSOR_COLUMNS])
-    kf = _filter(metrics["observer_settings"]["alignment"], dt)
-    smoothed = kf.smooth(np.asarray(signals["time"]), Z)[:, kf.outputs.index("xi")]
+    smoothed = estimates["alignment.xi_smoothed"]  # computed once, by metrics()
     np.savetxt(out / "estimates_smoothed.csv", np.column_stack([signals["time"], smoothed]), delimiter=",",
                header="time,alignment.xi_smoothed", comments="", fmt="%.17g")
 

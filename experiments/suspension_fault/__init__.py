@@ -99,31 +99,28 @@ def _fmt(x, scale=1.0, digits=3) -> str:
     return "-" if x is None else f"{x * scale:.{digits}g}"
 
 
+COLUMNS = ("k1 true final [kN/m] | k1 estimate final [kN/m] | rel. error final | convergence (2 %) [s] | "
+           "detection delay (5 %) [s]")
+
+
+def _cells(e: dict) -> str:
+    """One estimator's scores as table cells (the report and the study table share them)."""
+    return (f"{_fmt(e['k1_true_final'], 1e-3, 4)} | {_fmt(e['k1_est_final'], 1e-3, 4)} | "
+            f"{_fmt(e['rel_error_final'])} | {_fmt(e['convergence_time_s'])} | {_fmt(e.get('detection_delay_s'))}")
+
+
 def report_md(metrics: dict) -> str:
-    L = ["## k1 estimation", "", "| estimator | k1 true final [kN/m] | k1 estimate final [kN/m] | rel. error final "
-         "| convergence (2 %) [s] | detection delay (5 %) [s] |", "|---|---|---|---|---|---|"]
-    for name in ESTIMATORS:
-        m = metrics.get(name)
-        if m:
-            L.append(f"| {name} | {_fmt(m['k1_true_final'], 1e-3, 4)} | {_fmt(m['k1_est_final'], 1e-3, 4)} | "
-                     f"{_fmt(m['rel_error_final'])} | {_fmt(m['convergence_time_s'])} | "
-                     f"{_fmt(m.get('detection_delay_s'))} |")
+    L = ["## k1 estimation", "", f"| estimator | {COLUMNS} |", "|---|---|---|---|---|---|"]
+    L += [f"| {name} | {_cells(metrics[name])} |" for name in ESTIMATORS if metrics.get(name)]
     return "\n".join(L)
 
 
 def table_md(table: dict[str, dict]) -> str:
     """The study table: every variant, both estimators side by side, and the seed's claim."""
-    L = ["| variant | estimator | k1 true final [kN/m] | k1 estimate final [kN/m] | rel. error final | "
-         "convergence (2 %) [s] | detection delay (5 %) [s] | seed 004 |", "|---|---|---|---|---|---|---|---|"]
+    L = [f"| variant | estimator | {COLUMNS} | seed 004 |", "|---|---|---|---|---|---|---|---|"]
     for variant, m in table.items():
-        for name in ESTIMATORS:
-            e = m.get(name)
-            if not e:
-                continue
-            L.append(f"| {variant} | {name} | {_fmt(e['k1_true_final'], 1e-3, 4)} | "
-                     f"{_fmt(e['k1_est_final'], 1e-3, 4)} | {_fmt(e['rel_error_final'])} | "
-                     f"{_fmt(e['convergence_time_s'])} | {_fmt(e.get('detection_delay_s'))} | "
-                     f"{SEED_CLAIM if name == 'seed_wls' else ''} |")
+        L += [f"| {variant} | {name} | {_cells(m[name])} | {SEED_CLAIM if name == 'seed_wls' else ''} |"
+              for name in ESTIMATORS if m.get(name)]
     L += ["", "Targets for `improved`: rel. error final <= 0.02 in every variant, convergence <= 20 s in "
           "`static`, detection delay <= 5 s in `step_fault`. `step_response` is seed 004 Fig. 2 "
           "(no estimation target)."]
