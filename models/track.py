@@ -102,6 +102,24 @@ at ``s_i`` and the rates ``d/dt = V d/ds``::
     vertical_right_i    = xi_vp(s_i) - b theta(s_i)                m
     *_rate_i            = V d/ds (...)(s_i)                        m/s
 
+Run-in
+------
+With ``L_r`` = ``run_in_length`` > 0, the total deviation of every channel (the sum of the
+random, harmonic, step and measured-profile parts; alignment and both rails, at every
+wheelset) is multiplied by the raised-cosine weight of that wheelset's position ``s`` ::
+
+    w(s) = 0                             s <= 0
+           (1 - cos(pi s / L_r)) / 2     0 < s < L_r
+           1                             s >= L_r
+
+and the rates follow the product rule, ``d(w x)/ds = w dx/ds + x dw/ds`` with
+``dw/ds = pi / (2 L_r) sin(pi s / L_r)`` on ``0 < s < L_r`` and 0 elsewhere (times ``V`` for
+the time rates). Why: a vehicle model and an estimator that both start from rest on ideal
+track are in equilibrium at t = 0; the run-in takes them onto the irregular track smoothly,
+as multibody track simulations do, instead of starting the vehicle centred while the rails
+are already millimetres off. ``run_in_length = 0`` (the default) switches it off: the weight
+is not evaluated and the outputs are unchanged, also at ``s < 0``. See :func:`run_in_weight`.
+
 Parameters
 ----------
 =========================== ======== ========= ==========================================
@@ -128,12 +146,14 @@ step_lateral, step_vertical m        0
 step_position               m        100
 profile_file                (string) ""        CSV table, none when empty
 profile_scale               ""       1         factor on the table
+run_in_length               m        0         raised-cosine ramp from s = 0 (see Run-in);
+                                               0: none
 =========================== ======== ========= ==========================================
 
 Python API: :data:`TRACK` (the model definition), :func:`psd_alignment`,
 :func:`psd_vertical`, :func:`psd_crosslevel`, :class:`SplitMix64`, :func:`spectral_lines`,
 :func:`grid_size`, :class:`ProfileTable`, :class:`TrackIrregularity`,
-:func:`check_track_parameters`, :func:`tabulation_error_bound`.
+:func:`check_track_parameters`, :func:`tabulation_error_bound`, :func:`run_in_weight`.
 """
 
 from __future__ import annotations
@@ -251,6 +271,7 @@ def check_track_parameters(p: Mapping[str, float]) -> None:
     need(p["grid_step"] > 0, "grid_step", "> 0")
     need(p["half_contact_width"] > 0, "half_contact_width", "> 0")
     need(p["harmonic_wavelength"] > 0, "harmonic_wavelength", "> 0")
+    need(p["run_in_length"] >= 0, "run_in_length", ">= 0")
     if p["psd_level"] != 0 and grid_size(p) > MAX_GRID_POINTS:
         raise ValueError(f"parameter grid_step = {float(p['grid_step']):g} with period_length = "
                          f"{float(p['period_length']):g} and lambda_min = {float(p['lambda_min']):g} "
@@ -335,6 +356,22 @@ def _hermite(t, h, y0, m0, y1, m1):
     value = h00 * y0 + h10 * h * m0 + h01 * y1 + h11 * h * m1
     slope = (d00 * y0 + d01 * y1) / h + d10 * m0 + d11 * m1
     return value, slope
+
+
+# ---- run-in ------------------------------------------------------------------------------
+
+def run_in_weight(s, length: float) -> tuple[np.ndarray, np.ndarray]:
+    """The run-in weight and its slope at track positions ``s`` (m) for ``length`` > 0 (m):
+    ``w = 0`` at ``s <= 0``, ``(1 - cos(pi s / length)) / 2`` on ``0 < s < length``, 1 beyond;
+    ``dw/ds = pi / (2 length) sin(pi s / length)`` inside, 0 elsewhere. The same arithmetic
+    as the C's ``run_in_weight``."""
+    s = np.asarray(s, dtype=float)
+    length = float(length)
+    arg = math.pi * np.clip(s, 0.0, length) / length  # clipped: no overflow outside
+    inside = (s > 0.0) & (s < length)
+    w = np.where(inside, 0.5 * (1.0 - np.cos(arg)), np.where(s >= length, 1.0, 0.0))
+    w_d = np.where(inside, (math.pi / (2.0 * length)) * np.sin(arg), 0.0)
+    return w, w_d
 
 
 # ---- measured profile table ----------------------------------------------------------------
@@ -551,6 +588,11 @@ class TrackIrregularity:
             g = p["profile_scale"]
             ali, zl, zr = ali + g * tv[0], zl + g * tv[1], zr + g * tv[2]
             ali_d, zl_d, zr_d = ali_d + g * td[0], zl_d + g * td[1], zr_d + g * td[2]
+        # run-in: the total deviation times w(s), the slopes by the product rule
+        if p["run_in_length"] > 0:
+            w, w_d = run_in_weight(s, p["run_in_length"])
+            ali_d, zl_d, zr_d = w * ali_d + ali * w_d, w * zl_d + zl * w_d, w * zr_d + zr * w_d
+            ali, zl, zr = w * ali, w * zl, w * zr
         return {"alignment": ali, "vertical_left": zl, "vertical_right": zr,
                 "alignment_ds": ali_d, "vertical_left_ds": zl_d, "vertical_right_ds": zr_d}
 
@@ -655,6 +697,11 @@ TRACK = Model(
                   "resources/; none when empty", unit="", start="", type="String", source="choice"),
         Parameter("profile_scale", "factor on the measured profile", unit="", start=1.0,
                   source="choice"),
+        # appended last: the other parameters keep their value references
+        Parameter("run_in_length", "length over which all irregularities ramp in from zero at "
+                  "s = 0 (raised cosine); 0: no run-in", unit="m", start=0.0, min=0.0,
+                  source="choice: vehicle and estimator start in equilibrium on ideal track and "
+                  "run onto the irregular track smoothly, as multibody track simulations do"),
     ],
     outputs=_outputs(),
     c_sources=["TrackIrregularity.c"],

@@ -10,9 +10,10 @@ from scipy.integrate import quad
 from fmpy import simulate_fmu
 from scipy.signal import periodogram, welch
 
+import models.track
 from models.track import (TRACK, ProfileTable, SplitMix64, TrackIrregularity, grid_size,
-                          psd_alignment, psd_crosslevel, psd_vertical, spectral_lines,
-                          tabulation_error_bound)
+                          psd_alignment, psd_crosslevel, psd_vertical, run_in_weight,
+                          spectral_lines, tabulation_error_bound)
 
 DS = 0.25  # m, spatial sampling of the spectral tests
 B = TRACK.variable("half_contact_width").start
@@ -214,7 +215,8 @@ def test_bad_parameters_python():
                    ({"lambda_min": -1.0}, "parameter lambda_min = -1 must be > 0"),
                    ({"lambda_max": 0.5}, "parameter lambda_max = 0.5 must be > lambda_min = 1"),
                    ({"psd_level": 3}, "parameter psd_level = 3 must be 0, 1 or 2"),
-                   ({"grid_step": 1e-4}, "needs more than 4194304 grid points")]:
+                   ({"grid_step": 1e-4}, "needs more than 4194304 grid points"),
+                   ({"run_in_length": -1.0}, "parameter run_in_length = -1 must be >= 0")]:
         with pytest.raises(ValueError, match=msg):
             TrackIrregularity(p)
 
@@ -316,6 +318,7 @@ def test_fmu_reports_bad_profile_table(track_fmu, tmp_path, name):
     ({"harmonic_wavelength": 0.0}, "parameter harmonic_wavelength = 0 must be > 0"),
     ({"grid_step": 1e-4}, "needs more than 4194304 grid points"),
     ({"profile_file": "missing.csv"}, "missing.csv: cannot open"),  # relative: in resources/
+    ({"run_in_length": -1.0}, "parameter run_in_length = -1 must be >= 0"),
 ])
 def test_fmu_rejects_bad_parameters(track_fmu, params, msg):
     assert msg in _initialisation_error(track_fmu, params)
@@ -355,3 +358,152 @@ def test_channel_scales_switch_one_channel_and_keep_the_others(fmu_dir):
     py = TrackIrregularity({**base, "psd_vertical_scale": 0.0}).outputs(t)
     np.testing.assert_allclose(py["alignment_1"], ref["alignment_1"], atol=1e-8)
     assert not np.asarray(py["vertical_left_1"]).any()
+
+
+# ---- 5. run-in -------------------------------------------------------------------------------
+
+RUN_IN = 30.0  # m
+CHANNELS_OUT = ("alignment", "vertical_left", "vertical_right")
+
+
+def test_run_in_weight():
+    """w = 0 at s <= 0, the raised cosine inside, 1 at s >= L; dw/ds its derivative, 0 outside;
+    exactly 0 / 1 at and beyond the ends."""
+    s = np.array([-1e9, -1.0, 0.0, 7.5, 15.0, 22.5, 30.0, 31.0, 1e9])
+    w, w_d = run_in_weight(s, RUN_IN)
+    assert w.tolist()[:3] == [0.0, 0.0, 0.0] and w.tolist()[-3:] == [1.0, 1.0, 1.0]
+    assert not w_d[:3].any() and not w_d[-3:].any()
+    r = math.sqrt(0.5)  # cos and sin of pi/4, 3 pi/4
+    np.testing.assert_allclose(w[3:6], [(1 - r) / 2, 0.5, (1 + r) / 2], rtol=1e-15)
+    np.testing.assert_allclose(w_d[3:6], np.pi / (2 * RUN_IN) * np.array([r, 1.0, r]), rtol=1e-15)
+    x = np.linspace(1e-3, RUN_IN - 1e-3, 2001)  # dw/ds is the derivative of w
+    fd = (run_in_weight(x + 1e-6, RUN_IN)[0] - run_in_weight(x - 1e-6, RUN_IN)[0]) / 2e-6
+    np.testing.assert_allclose(fd, run_in_weight(x, RUN_IN)[1], atol=1e-9)
+
+
+def test_run_in_zero_does_not_evaluate_the_weight(monkeypatch):
+    """run_in_length = 0 (the default) never calls the weight: the outputs are those without
+    the feature, also at s < 0."""
+    def boom(*_):
+        raise AssertionError("run_in_weight evaluated with run_in_length = 0")
+
+    monkeypatch.setattr(models.track, "run_in_weight", boom)
+    tr = TrackIrregularity({"seed": 3, "harmonic_lateral_amplitude": 1e-3})
+    r = tr.rails(np.linspace(-50.0, 50.0, 101))
+    assert r["alignment"][0] != 0.0 and r["alignment_ds"][0] != 0.0
+
+
+def _run_in_params(tmp_path, run_in):
+    return {"seed": 7, "psd_level": 2, "harmonic_lateral_amplitude": 1e-3,
+            "harmonic_vertical_amplitude": 5e-4, "harmonic_wavelength": 15.66,
+            "harmonic_phase": 0.3, "step_lateral": 2e-3, "step_vertical": -1e-3,
+            "step_position": 12.3,  # inside the ramp
+            "profile_file": str(_profile_csv(tmp_path / "profile.csv")), "profile_scale": 1.5,
+            "s_start": -10.0, "run_in_length": run_in}
+
+
+def test_fmu_equals_python_with_run_in(track_fmu, tmp_path):
+    """run_in_length = 30 m, all components, all outputs and rates at all wheelsets over 200 m
+    (every wheelset starts at s < 0 and crosses the whole ramp), with the tolerances of
+    test_fmu_equals_python; against the exact cosine sum the rate bound gains the product
+    rule's term |dw/ds| bound_m <= pi / (2 L) bound_m (w <= 1)."""
+    params = _run_in_params(tmp_path, RUN_IN)
+    res = simulate_fmu(str(track_fmu), start_values=params, stop_time=10.0, output_interval=0.005,
+                       output=[o.name for o in TRACK.outputs])
+    tr = TrackIrregularity(params)
+    tab = tr.outputs(res["time"], "tabulated")
+    exact = tr.outputs(res["time"], "exact")
+    bound_m, bound_slope = tabulation_error_bound(tr.params)
+    V = tr.params["V"]
+    for name in tab:
+        rate = "rate" in name
+        assert np.abs(res[name] - tab[name]).max() <= (1e-12 * V if rate else 1e-13), name
+        tol = (bound_slope + math.pi / (2 * RUN_IN) * bound_m) * V if rate else bound_m
+        assert np.abs(res[name] - exact[name]).max() <= tol + 1e-12, name
+    # the run-in is really there: zero before s = 0, not the unweighted track in the ramp
+    plain = TrackIrregularity({**params, "run_in_length": 0.0}).outputs(res["time"], "tabulated")
+    s1 = np.asarray(res["position"])
+    ramp = (s1 > 1.0) & (s1 < RUN_IN - 1.0)
+    for name in ("alignment_1", "alignment_rate_1", "vertical_left_1", "vertical_right_rate_1"):
+        assert not res[name][s1 <= 0].any(), name
+        assert np.abs(res[name] - plain[name])[ramp].min() > 0, name
+
+
+def test_run_in_rates_are_the_derivatives(track_fmu):
+    """The FMU's rate outputs are the time derivatives of its value outputs across the ramp:
+    the central difference over dt = 0.1 ms (2 mm of track) agrees within its Taylor error
+    V (V dt)^2 / 6 max|d3/ds3 (w x)|, the third derivative bounded by Leibniz's rule,
+    sum_j C(3, j) max|d^j w| max|d^(3-j) x| with max|d^j w| <= pi^j / (2 L^j) (j >= 1) and
+    max|d^n x| <= sum_k a_k Omega_k^n + A (2 pi / lambda_h)^n (rails: a_vp + b a_theta).
+    Measured ~4e-7 m/s against a bound of ~2e-5 m/s; the product rule's term V x dw/ds alone
+    exceeds 100 times the bound, so a rate without it would fail."""
+    A_y, A_z, lam = 1e-3, 5e-4, 15.66
+    params = {"seed": 7, "psd_level": 2, "harmonic_lateral_amplitude": A_y,
+              "harmonic_vertical_amplitude": A_z, "harmonic_wavelength": lam, "s_start": -5.0,
+              "run_in_length": RUN_IN}
+    dt = 1e-4
+    res = simulate_fmu(str(track_fmu), start_values=params, stop_time=3.0, step_size=dt,
+                       output_interval=dt, output=[o.name for o in TRACK.outputs])
+    tr = TrackIrregularity(params)
+    plain = TrackIrregularity({**params, "run_in_length": 0.0})
+    V, b = tr.params["V"], tr.params["half_contact_width"]
+    lines, kh = tr.lines, 2 * math.pi / lam
+    amp = {"alignment": lines.amplitude[0], "rail": lines.amplitude[1] + b * lines.amplitude[2]}
+    harm = {"alignment": A_y, "rail": A_z}
+    w_max = [1.0] + [math.pi**j / (2 * RUN_IN**j) for j in (1, 2, 3)]
+
+    def x_max(kind, n):
+        return np.sum(amp[kind] * lines.omega**n) + harm[kind] * kh**n
+
+    t = np.asarray(res["time"])
+    s1 = np.asarray(res["position"])
+    worst = 0.0
+    for i in range(1, 5):
+        s = s1 - tr.params[f"axle_position_{i}"]
+        assert s[0] < 0 and s[-1] > RUN_IN  # every wheelset crosses the whole ramp
+        ramp = (s[1:-1] > 0) & (s[1:-1] < RUN_IN)
+        w_d = run_in_weight(s, RUN_IN)[1]
+        x0 = plain.rails(s, "tabulated")
+        for name in CHANNELS_OUT:
+            kind = "alignment" if name == "alignment" else "rail"
+            d3 = sum(math.comb(3, j) * w_max[j] * x_max(kind, 3 - j) for j in range(4))
+            tol = V * (V * dt) ** 2 / 6 * d3 + 1e-12
+            x, rate = np.asarray(res[f"{name}_{i}"]), np.asarray(res[f"{name}_rate_{i}"])
+            fd = (x[2:] - x[:-2]) / (t[2:] - t[:-2])
+            err = np.abs(fd - rate[1:-1])[ramp].max()
+            worst = max(worst, err)
+            assert err <= tol, (name, i, err, tol)
+            assert np.abs(V * x0[name] * w_d).max() > 100 * tol, (name, i)
+    print(f"run-in: worst |central difference - rate| {worst:.2e} m/s")
+
+
+def test_run_in_is_zero_before_and_unchanged_after(track_fmu, tmp_path):
+    """Values and rates are exactly 0 at s <= 0 and bit for bit the run_in_length = 0 outputs
+    at s >= L, in the FMU (per wheelset, s_i = position - axle_position_i as the FMU computes
+    it) and in Python (both evaluations, including s = 0 and s = L themselves)."""
+    params = _run_in_params(tmp_path, RUN_IN)
+    plain_params = {**params, "run_in_length": 0.0}
+    names = [o.name for o in TRACK.outputs]
+    res = simulate_fmu(str(track_fmu), start_values=params, stop_time=5.0, output_interval=0.005,
+                       output=names)
+    ref = simulate_fmu(str(track_fmu), start_values=plain_params, stop_time=5.0,
+                       output_interval=0.005, output=names)
+    s1 = np.asarray(res["position"])
+    np.testing.assert_array_equal(s1, ref["position"])
+    for i in range(1, 5):
+        s = s1 - TRACK.variable(f"axle_position_{i}").start
+        before, after = s <= 0, s >= RUN_IN
+        assert before.sum() > 50 and after.sum() > 50
+        for name in CHANNELS_OUT:
+            for n in (f"{name}_{i}", f"{name}_rate_{i}"):
+                assert not res[n][before].any(), n
+                assert ref[n][before].all(), n  # the L = 0 track is not zero there
+                np.testing.assert_array_equal(res[n][after], ref[n][after], err_msg=n)
+    # Python, on both sides of and exactly at the ends
+    s = np.concatenate([np.linspace(-40.0, 0.0, 81), np.linspace(RUN_IN, 200.0, 341)])
+    for method in ("exact", "tabulated"):
+        r = TrackIrregularity(params).rails(s, method)
+        r0 = TrackIrregularity(plain_params).rails(s, method)
+        for name, v in r.items():
+            assert not v[s <= 0].any(), (method, name)
+            np.testing.assert_array_equal(v[s >= RUN_IN], r0[name][s >= RUN_IN], err_msg=name)

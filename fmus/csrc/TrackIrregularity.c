@@ -7,6 +7,8 @@
  * of M = 2^n points by one complex inverse FFT per channel (value in the real part, slope
  * in the imaginary part); the outputs interpolate the table with cubic Hermite polynomials.
  * Deterministic parts: harmonic, step, measured profile table (CSV, Catmull-Rom Hermite).
+ * Run-in (run_in_length > 0): the sum times a raised-cosine weight of s, rates by the product
+ * rule (as models.track.run_in_weight and TrackIrregularity.rails).
  *
  * The variable tables (model_real_info, ...) are generated from the Python definition into
  * a separate file; the VR_/VRI_/VRS_ defines come from the generated model_config.h.
@@ -397,6 +399,20 @@ static void eval_profile(const TrackData *d, double s, double *v, double *dv) {
     }
 }
 
+/* ---- run-in: weight w and dw/ds at s for length > 0 (as models.track.run_in_weight) ---- */
+static void run_in_weight(double s, double length, double *w, double *w_d) {
+    if (s <= 0.0) {
+        *w = *w_d = 0.0;
+    } else if (s >= length) {
+        *w = 1.0;
+        *w_d = 0.0;
+    } else {
+        const double arg = PI * s / length;
+        *w = 0.5 * (1.0 - cos(arg));
+        *w_d = (PI / (2.0 * length)) * sin(arg);
+    }
+}
+
 /* ---- tables: build, compare, free ---- */
 static const char *profile_file(ModelInstance *m) {
     return m->s[VRS_profile_file] ? m->s[VRS_profile_file] : "";
@@ -465,7 +481,8 @@ int model_check_parameters(ModelInstance *m) {
         {"harmonic_vertical_amplitude", VR_harmonic_vertical_amplitude},
         {"harmonic_wavelength", VR_harmonic_wavelength}, {"harmonic_phase", VR_harmonic_phase},
         {"step_lateral", VR_step_lateral}, {"step_vertical", VR_step_vertical},
-        {"step_position", VR_step_position}, {"profile_scale", VR_profile_scale}};
+        {"step_position", VR_step_position}, {"profile_scale", VR_profile_scale},
+        {"run_in_length", VR_run_in_length}};
     const double *r = m->r;
     size_t j;
     for (j = 0; j < sizeof reals / sizeof reals[0]; j++)
@@ -486,6 +503,7 @@ int model_check_parameters(ModelInstance *m) {
     CHECK(r[VR_grid_step] > 0, "grid_step", r[VR_grid_step], "> 0");
     CHECK(r[VR_half_contact_width] > 0, "half_contact_width", r[VR_half_contact_width], "> 0");
     CHECK(r[VR_harmonic_wavelength] > 0, "harmonic_wavelength", r[VR_harmonic_wavelength], "> 0");
+    CHECK(r[VR_run_in_length] >= 0, "run_in_length", r[VR_run_in_length], ">= 0");
     if (m->i[VRI_psd_level] != 0) {
         double k_lo, k_hi;
         line_range(r[VR_period_length], r[VR_lambda_min], r[VR_lambda_max], &k_lo, &k_hi);
@@ -515,7 +533,7 @@ int model_outputs(ModelInstance *m) {
     const double front = r[VR_s_start] + V * r[0];
     const double kh = 2.0 * PI / r[VR_harmonic_wavelength];
     const double Ay = r[VR_harmonic_lateral_amplitude], Az = r[VR_harmonic_vertical_amplitude];
-    const double g = r[VR_profile_scale];
+    const double g = r[VR_profile_scale], run_in = r[VR_run_in_length];
     int i;
     if (!d) {
         model_error(m, "TrackIrregularity: outputs requested before initialisation");
@@ -554,6 +572,16 @@ int model_outputs(ModelInstance *m) {
             ali_d += g * dv[0];
             zl_d += g * dv[1];
             zr_d += g * dv[2];
+        }
+        if (run_in > 0.0) { /* the total deviation times w(s); slopes by the product rule */
+            double w, w_d;
+            run_in_weight(s, run_in, &w, &w_d);
+            ali_d = w * ali_d + ali * w_d;
+            zl_d = w * zl_d + zl * w_d;
+            zr_d = w * zr_d + zr * w_d;
+            ali = w * ali;
+            zl = w * zl;
+            zr = w * zr;
         }
         r[VR_ALIGNMENT[i]] = ali;
         r[VR_ALIGNMENT_RATE[i]] = V * ali_d;
