@@ -19,7 +19,7 @@ build: setup
 	$(BIN)/railfmu build
 
 run: build
-	$(BIN)/railfmu run suspension_fault --out $(OUT)/suspension_fault
+	$(BIN)/railfmu run lateral_alignment --master container --out $(OUT)/lateral_alignment
 
 test: setup
 	$(BIN)/python -m pytest -q
