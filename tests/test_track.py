@@ -235,6 +235,27 @@ def _profile_csv(path):
     return path
 
 
+def _fmu_equals_python(track_fmu, params, run_in=0.0):
+    """10 s of the FMU against the Python twin: tabulated to rounding, exact within the
+    tabulation bound (the rate bound gains the run-in's product-rule term
+    |dw/ds| bound_m <= pi / (2 L) bound_m). Returns the FMU result, the twin, and the twin's
+    tabulated and exact outputs."""
+    res = simulate_fmu(str(track_fmu), start_values=params, stop_time=10.0, output_interval=0.005,
+                       output=[o.name for o in TRACK.outputs])
+    tr = TrackIrregularity(params)
+    tab = tr.outputs(res["time"], "tabulated")
+    exact = tr.outputs(res["time"], "exact")
+    bound_m, bound_slope = tabulation_error_bound(tr.params)
+    V = tr.params["V"]
+    extra = math.pi / (2 * run_in) * bound_m if run_in > 0 else 0.0
+    for name in tab:
+        rate = "rate" in name
+        assert np.abs(res[name] - tab[name]).max() <= (1e-12 * V if rate else 1e-13), name
+        tol = (bound_slope + extra) * V if rate else bound_m
+        assert np.abs(res[name] - exact[name]).max() <= tol + 1e-12, name
+    return res, tr, tab, exact
+
+
 @pytest.mark.parametrize("psd_level", [1, 2])
 def test_fmu_equals_python(track_fmu, tmp_path, psd_level):
     """All outputs at all wheelsets over 200 m of track (random + harmonic + step + table).
@@ -250,18 +271,9 @@ def test_fmu_equals_python(track_fmu, tmp_path, psd_level):
               "harmonic_phase": 0.3, "step_lateral": 2e-3, "step_vertical": -1e-3,
               "step_position": 100.3, "profile_file": str(_profile_csv(tmp_path / "profile.csv")),
               "profile_scale": 1.5, "s_start": -10.0}
-    res = simulate_fmu(str(track_fmu), start_values=params, stop_time=10.0, output_interval=0.005,
-                       output=[o.name for o in TRACK.outputs])
-    tr = TrackIrregularity(params)
-    tab = tr.outputs(res["time"], "tabulated")
-    exact = tr.outputs(res["time"], "exact")
+    res, tr, tab, exact = _fmu_equals_python(track_fmu, params)
     bound_m, bound_slope = tabulation_error_bound(tr.params)
     V = tr.params["V"]
-    for name in tab:
-        rate = "rate" in name
-        assert np.abs(res[name] - tab[name]).max() <= (1e-12 * V if rate else 1e-13), name
-        tol = bound_slope * V if rate else bound_m
-        assert np.abs(res[name] - exact[name]).max() <= tol + 1e-12, name
     # the components are all there: table range, step and harmonic visible in the outputs
     assert np.ptp(res["alignment_1"]) > 5e-3
     err_m = max(np.abs(res[n] - exact[n]).max() for n in tab if "rate" not in n)
@@ -408,18 +420,7 @@ def test_fmu_equals_python_with_run_in(track_fmu, tmp_path):
     test_fmu_equals_python; against the exact cosine sum the rate bound gains the product
     rule's term |dw/ds| bound_m <= pi / (2 L) bound_m (w <= 1)."""
     params = _run_in_params(tmp_path, RUN_IN)
-    res = simulate_fmu(str(track_fmu), start_values=params, stop_time=10.0, output_interval=0.005,
-                       output=[o.name for o in TRACK.outputs])
-    tr = TrackIrregularity(params)
-    tab = tr.outputs(res["time"], "tabulated")
-    exact = tr.outputs(res["time"], "exact")
-    bound_m, bound_slope = tabulation_error_bound(tr.params)
-    V = tr.params["V"]
-    for name in tab:
-        rate = "rate" in name
-        assert np.abs(res[name] - tab[name]).max() <= (1e-12 * V if rate else 1e-13), name
-        tol = (bound_slope + math.pi / (2 * RUN_IN) * bound_m) * V if rate else bound_m
-        assert np.abs(res[name] - exact[name]).max() <= tol + 1e-12, name
+    res, tr, tab, _ = _fmu_equals_python(track_fmu, params, run_in=RUN_IN)
     # the run-in is really there: zero before s = 0, not the unweighted track in the ramp
     plain = TrackIrregularity({**params, "run_in_length": 0.0}).outputs(res["time"], "tabulated")
     s1 = np.asarray(res["position"])
