@@ -8,8 +8,9 @@ seed's eqs. 9-17 on the simplified model with the identified primary suspension)
 the alignment online, and the RTS smoother offline. Variants: the conditions of seed
 Tables 2-4.
 
-Training and test track: the SM is identified (identify.py) and the filter's q_xi and
-sigma_virtual are tuned (tune.py) on track seed 1; the study is scored on track seed 39, whose
+Training and test track: the SM is identified (identify.py), the filter's q_xi and
+sigma_virtual are tuned and the smoother's own equivalent SM is fitted (tune.py; the observer
+``smoother`` in the SSD) on track seed 1; the study is scored on track seed 39, whose
 band content is the closest to what seed 000's Table 2 implies (parameters/track.ssv). The
 irregularities ramp in over the first 20 m (the track's run_in_length), and the scores start
 after it.
@@ -58,7 +59,7 @@ def identified() -> dict:
 
 
 def tuned() -> dict:
-    """The filter tuning on the training track (tune.py)."""
+    """The filter's tuning and the smoother's fitted SM, on the training track (tune.py)."""
     f = HERE / "tuned.json"
     return json.loads(f.read_text()) if f.is_file() else {}
 
@@ -203,7 +204,8 @@ def report_md(metrics: dict) -> str:
         f, sm = tune["filter"], tune["smoother"]
         L += ["", "## Filter tuning and the smoother's model, on the training track (tune.py)", "",
               f"Track seed {tune['training_track']['seed']}, sensor noise seed {tune['training_noise_seed']} "
-              f"(the study scores track seed 39, noise seed 100), variant {tune['variant']}. Filter: q_xi = "
+              f"(this run: track seed {metrics['parameters']['track'].get('seed')}, noise seed "
+              f"{metrics['parameters']['sensors'].get('seed')}), variant {tune['variant']}. Filter: q_xi = "
               f"{f['q_xi']:g} m^2/s, sigma_virtual = {f['sigma_virtual']:g} m ({f['criterion']}).", "",
               "| q_xi [m^2/s] | sigma_virtual [m] | whole | D1 | D2 | D3 | mean |", "|---|---|---|---|---|---|---|"]
         L += [f"| {g['q_xi']:g} | {g['sigma_virtual']:g} | " + " | ".join(f"{g['J_rel'][b]:.3f}" for b in BANDS)
