@@ -547,10 +547,11 @@ class _Reader:
         out = []
         for comp in self.comps.values():
             for var in comp.md.modelVariables:
-                if var.causality == "input" and (comp.name, var.name) not in fed:
-                    what, value = (("its bound value", comp.params[var.name]) if var.name in comp.params
-                                   else ("its start value", var.start))
-                    out.append(f"{comp.name}.{var.name}: input not connected; keeps {what} {_show(value)}")
+                # an input the SSD/SSV binds to a value is unconnected on purpose: no warning
+                if (var.causality == "input" and (comp.name, var.name) not in fed
+                        and var.name not in comp.params):
+                    out.append(f"{comp.name}.{var.name}: input not connected; keeps its start value "
+                               f"{_show(var.start)}")
         return out
 
 

@@ -282,6 +282,9 @@ def test_unconnected_input_warns(fmu_dir, tmp_path):
     write_ssd(tmp_path, connections=ALIGNMENT)
     s = read_system(tmp_path, fmu_dirs=[fmu_dir])
     assert s.warnings == ["wheelset.xi_rate: input not connected; keeps its start value 0"]
+    # an input given a value on purpose (a binding, a variant or --set) is not warned about
+    bound = read_system(tmp_path, fmu_dirs=[fmu_dir], overrides={"wheelset": {"xi_rate": 0.0}})
+    assert bound.warnings == [] and bound.component("wheelset").parameters["xi_rate"] == 0.0
 
 
 # -- annotations and time -------------------------------------------------------------------
