@@ -268,6 +268,12 @@ class AlignmentKalmanFilter(Observer):
         WHEELSET.check_parameters(self.params)
         V = self.params["V"]
         self.q_xi = float(s["q_xi"]) if s["q_xi"] is not None else q_xi_from_spectrum(V, s["psd_level"])
+        # standard deviations square into R, so a sign slip would pass unnoticed
+        for name, positive in (("sigma_acc", True), ("sigma_gyro", True), ("sigma_virtual", True),
+                               ("q_xi", True), ("q_acc", False), ("q_yaw", False)):
+            v = self.q_xi if name == "q_xi" else s[name]
+            if v is not None and not (math.isfinite(float(v)) and (float(v) > 0 if positive else float(v) >= 0)):
+                raise ValueError(f"AlignmentKalmanFilter: {name} must be {'> 0' if positive else '>= 0'}, not {v!r}")
         self.sigma_virtual = (float(s["sigma_virtual"]) if s["sigma_virtual"] is not None
                               else sigma_virtual_from_spectrum(self.q_xi, V, self.dt))
         self.steady_state = _as_bool(s["steady_state"], "steady_state")

@@ -219,3 +219,11 @@ def test_smoother_speed(erri_low):
     elapsed = time.perf_counter() - t0
     print(f"\nfixed-gain smoother: {elapsed:.3f} s for {len(t)} steps ({1e6 * elapsed / len(t):.1f} us/step)")
     assert elapsed < 2.0
+
+
+@pytest.mark.parametrize("setting, value", [("sigma_virtual", -8.0), ("sigma_acc", 0.0), ("sigma_gyro", float("nan")),
+                                            ("q_xi", -1e-4), ("q_acc", -1.0)])
+def test_bad_noise_settings_are_refused(setting, value):
+    """A standard deviation squares into R and would pass with the wrong sign: refused by name."""
+    with pytest.raises(ValueError, match=f"AlignmentKalmanFilter: {setting} must be"):
+        AlignmentKalmanFilter(DT, V=V, **{setting: value})
