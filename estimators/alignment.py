@@ -395,10 +395,9 @@ class AlignmentKalmanFilter(Observer):
         if self.steady_state:
             # _predict and _update inlined, operation for operation (the same products in the
             # same order, so bit-identical to run; the hook calls cost half the time); the
-            # innovations are kept for the backward pass (NaN rows: none, predicted only)
+            # innovations are kept for the backward pass
             F, K, H, zb, x = self.F, self.K, self.H, self._zbuf, self._x
             NU = np.zeros((n_grid, 4))
-            upd = np.zeros(n_grid, dtype=bool)
             for k in range(n):
                 for i in range(gaps[k]):
                     x = F @ x
@@ -409,7 +408,7 @@ class AlignmentKalmanFilter(Observer):
                     zb[:3] = Z[k]
                     nu = zb - H @ x
                     x = x + K @ nu
-                    NU[g], upd[g] = nu, True
+                    NU[g] = nu
                 X[g] = x
                 g += 1
             self._x = x
@@ -429,8 +428,8 @@ class AlignmentKalmanFilter(Observer):
         #: the forward (filtered) estimates of the last smooth(), at the sample times
         self.last_filtered = X[rows]
 
-        if self.steady_state and upd.all():
-            Xs = self._mbf_backward(X, NU, upd)
+        if self.steady_state and n_grid == n and ok.all():
+            Xs = self._mbf_backward(X, NU)
         elif self.steady_state:
             # a gap or a NaN row: the covariance is no longer the stationary one, and the
             # stationary smoother would turn the large innovation after the gap into a large
@@ -442,36 +441,29 @@ class AlignmentKalmanFilter(Observer):
             Xs = self._kf.rts_smoother(X, P, inv=_spd_inv)[0]
         return Xs[rows]
 
-    def _mbf_backward(self, X: np.ndarray, NU: np.ndarray, upd: np.ndarray) -> np.ndarray:
+    def _mbf_backward(self, X: np.ndarray, NU: np.ndarray) -> np.ndarray:
         """Backward pass of the stationary smoother in the modified Bryson-Frazier form
-        (every grid point updated)
-        (Bierman, Factorization Methods for Discrete Sequential Estimation, 1977, ch. X)::
+        (Bierman, Factorization Methods for Discrete Sequential Estimation, 1977, ch. X), for
+        a record where every grid point was updated (filtered ``X``, innovations ``NU``)::
 
-            lam~_k = -H^T S^-1 nu_k + (I - K H)^T lam^_k     (an updated grid point)
-            lam~_k = lam^_k                                   (a prediction-only one)
-            lam^_{k-1} = F^T lam~_k,   lam^_N = 0,   x^s_k = x^+_k - P_k lam^_k
+            lam~_k = -H^T S^-1 nu_k + (I - K H)^T lam^_k
+            lam^_{k-1} = F^T lam~_k,   lam^_N = 0,   x^s_k = x^+_k - P^+ lam^_k
 
-        with ``P_k`` = :attr:`P_post` (:attr:`P_prior` where nothing was measured). It is the
-        RTS smoother rearranged (the same estimate), but its backward recursion runs on
-        ``((I - K H) F)^T``, the transpose of the filter's own closed-loop matrix: stable
+        It is the RTS smoother rearranged (the same estimate), but its backward recursion runs
+        on ``((I - K H) F)^T``, the transpose of the filter's own closed-loop matrix: stable
         whenever the filter is. RTS's ``C = P^+ F^T (P^-)^{-1}`` needs the inverse of a
         covariance that spans ten decades; its spectral radius (1 - 5e-5 in theory, the
         common mode) came out above 1 for weakly pinned settings, and the backward pass
         diverged."""
-        F, H, K = self.F, self.H, self.K
+        F, H, K, Pp = self.F, self.H, self.K, self.P_post
         S = H @ self.P_prior @ H.T + self.R
-        W = NU @ np.linalg.solve(S, H)  # (H^T S^-1 nu_k)^T per grid point (0 where no update)
+        W = NU @ np.linalg.solve(S, H)  # (H^T S^-1 nu_k)^T per grid point
         A_upd = np.eye(7) - K @ H  # lam @ A_upd = (I - K H)^T lam
         Xs = np.empty_like(X)
         lam = np.zeros(7)
-        Pp, Pm = self.P_post, self.P_prior
         for j in range(X.shape[0] - 1, -1, -1):
-            if upd[j]:
-                Xs[j] = X[j] - Pp @ lam
-                lam = F.T @ (lam @ A_upd - W[j])
-            else:
-                Xs[j] = X[j] - Pm @ lam
-                lam = F.T @ lam
+            Xs[j] = X[j] - Pp @ lam
+            lam = F.T @ (lam @ A_upd - W[j])
         return Xs
 
     # -- diagnostics -------------------------------------------------------------------------

@@ -52,16 +52,19 @@ PLOTS = {  # seed Fig. 4: the three sensor signals
 }
 
 
+def _beside(name: str) -> dict:
+    f = HERE / name
+    return json.loads(f.read_text()) if f.is_file() else {}
+
+
 def identified() -> dict:
     """The identification of the SM's primary suspension against the CM (identify.py)."""
-    f = HERE / "identified.json"
-    return json.loads(f.read_text()) if f.is_file() else {}
+    return _beside("identified.json")
 
 
 def tuned() -> dict:
     """The filter's tuning and the smoother's fitted SM, on the training track (tune.py)."""
-    f = HERE / "tuned.json"
-    return json.loads(f.read_text()) if f.is_file() else {}
+    return _beside("tuned.json")
 
 
 def _filter(settings: dict, dt: float):

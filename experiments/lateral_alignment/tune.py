@@ -53,9 +53,8 @@ from estimators.alignment import AlignmentKalmanFilter
 from estimators.metrics import alignment_errors
 from experiments.runner import find_experiment, load_system
 from fmus.masters import run
-from models.wheelset import WHEELSET
 
-from . import SENSOR_COLUMNS, START_UP_S
+from . import BANDS, SENSOR_COLUMNS, START_UP_S
 
 HERE = Path(__file__).resolve().parent
 TRAINING_TRACK = {"seed": 1, "psd_scale": 0.773}  # identify.py's track (1.4 mm over 3-200 m)
@@ -63,7 +62,12 @@ TRAINING_NOISE_SEED = 101  # the study's sensors use 100
 SMOOTHER_FREE = ("kx", "cx", "ky", "cy", "m_f", "f11", "f22")
 Q_XI = (1e-4, 2e-4, 4e-4, 8e-4, 1.6e-3)  # m^2/s
 SIGMA_VIRTUAL = (2.0, 4.0, 8.0, 16.0)  # m
-BANDS = ("whole", "D1", "D2", "D3")
+XI = AlignmentKalmanFilter.outputs.index("xi")
+
+
+def mean_j_rel(j: dict) -> float:
+    """The tuning criterion: mean J_rel over the four bands."""
+    return float(np.mean([j[b] for b in BANDS]))
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -79,14 +83,14 @@ def main(argv: list[str] | None = None) -> int:
     col = {c: res.data[:, k] for k, c in enumerate(res.columns)}
     t, truth = col["time"], col["track.alignment_1"]
     Z = np.column_stack([col[c] for c in SENSOR_COLUMNS])
-    settings = dict(system.observers[0].settings)
+    settings = dict(next(o.settings for o in system.observers if o.name == "alignment"))
     dt, V = system.step_size, float(settings["V"])
 
     grid = []
     for q, sv in itertools.product(Q_XI, SIGMA_VIRTUAL):
         kf = AlignmentKalmanFilter(dt, **{**settings, "q_xi": q, "sigma_virtual": sv})
-        j = alignment_errors(kf.run(t, Z)[:, STATES_XI], truth, V, dt, skip_s=START_UP_S)["J_rel"]
-        grid.append({"q_xi": q, "sigma_virtual": sv, "J_rel": j, "mean_J_rel": float(np.mean([j[b] for b in BANDS]))})
+        j = alignment_errors(kf.run(t, Z)[:, XI], truth, V, dt, skip_s=START_UP_S)["J_rel"]
+        grid.append({"q_xi": q, "sigma_virtual": sv, "J_rel": j, "mean_J_rel": mean_j_rel(j)})
         print(f"q_xi {q:8.2g} m^2/s  sigma_virtual {sv:5.1f} m  J_rel " + " ".join(f"{j[b]:.3f}" for b in BANDS)
               + f"  mean {grid[-1]['mean_J_rel']:.3f}")
     best = min(grid, key=lambda g: g["mean_J_rel"])
@@ -95,19 +99,19 @@ def main(argv: list[str] | None = None) -> int:
 
     # the smoother's equivalent SM, with the filter's pair
     start = {**settings, "q_xi": best["q_xi"], "sigma_virtual": best["sigma_virtual"]}
-    x0 = {k: float(start[k]) if k in start else float(WHEELSET.default_parameters()[k]) for k in SMOOTHER_FREE}
+    x0 = {k: AlignmentKalmanFilter(dt, **start).params[k] for k in SMOOTHER_FREE}  # the SSD's, else defaults
 
     def smoother_scores(theta):
         p = {k: x0[k] * float(np.exp(v)) for k, v in zip(SMOOTHER_FREE, theta)}
         kf = AlignmentKalmanFilter(dt, **{**start, **p})
-        return alignment_errors(kf.smooth(t, Z)[:, STATES_XI], truth, V, dt, skip_s=START_UP_S)["J_rel"], p
+        return alignment_errors(kf.smooth(t, Z)[:, XI], truth, V, dt, skip_s=START_UP_S)["J_rel"], p
 
     def cost(theta):
         try:
             j, _ = smoother_scores(theta)
         except ValueError:  # a parameter set the filter cannot be built for (e.g. not detectable)
             return 10.0
-        return float(np.mean([j[b] for b in BANDS]))
+        return mean_j_rel(j)
 
     n = len(SMOOTHER_FREE)
     j0, _ = smoother_scores(np.zeros(n))
@@ -137,8 +141,6 @@ def main(argv: list[str] | None = None) -> int:
     print(f"wrote {args.out}")
     return 0
 
-
-STATES_XI = AlignmentKalmanFilter.outputs.index("xi")
 
 if __name__ == "__main__":
     raise SystemExit(main())
