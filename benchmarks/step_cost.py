@@ -42,7 +42,7 @@ import fmpy  # noqa: E402
 from fmpy import extract, read_model_description  # noqa: E402
 from fmpy.fmi2 import FMU2Slave  # noqa: E402
 
-from fmus.build import build_all, fmi_header_dir  # noqa: E402
+from fmus.generate.build import build_all, fmi_header_dir  # noqa: E402
 
 STEP = 1e-3  # communication step, s
 MAX_SIM_TIME = 300.0  # s; the wheelset's free decay reaches denormal numbers after ~600 s,

@@ -17,12 +17,12 @@ from pathlib import Path
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 
-from fmus.build import BuildError  # noqa: E402
+from fmus.generate.build import BuildError  # noqa: E402
 from fmus.errors import UserError  # noqa: E402
 
 
 def cmd_build(args) -> int:
-    from fmus.build import build_all, validate
+    from fmus.generate.build import build_all, validate
 
     t0 = time.monotonic()
     paths = build_all(args.out, force=args.force)
@@ -36,7 +36,7 @@ def cmd_build(args) -> int:
 
 
 def cmd_validate(args) -> int:
-    from fmus.build import DEFAULT_OUT, build_all, validate
+    from fmus.generate.build import DEFAULT_OUT, build_all, validate
     from fmus.ssp import validate_ssp
 
     path = Path(args.path)
@@ -172,7 +172,7 @@ def main(argv: list[str] | None = None) -> int:
     p.set_defaults(fn=cmd_export)
     args = ap.parse_args(argv)
     if args.command == "build" and args.out is None:
-        from fmus.build import DEFAULT_OUT
+        from fmus.generate.build import DEFAULT_OUT
 
         args.out = DEFAULT_OUT
     try:

@@ -1,7 +1,7 @@
 """Observers attached to a run: a recorder sink that feeds each estimator its bound signals.
 
 The SSD declares each observer (``org.railfmu.observers`` annotation, read into
-:class:`fmus.system.ObserverSpec`). :class:`ObserverBank` instantiates them and, as a sink
+:class:`fmus.cosim.system.ObserverSpec`). :class:`ObserverBank` instantiates them and, as a sink
 of the master, hands every recorded row to each observer's ``step`` — one communication
 step at a time inside the Python masters, row by row from blocks on the container path
 (observers are passive, so both see the same samples). ``estimates.csv`` is written as the
@@ -17,8 +17,8 @@ from pathlib import Path
 import numpy as np
 
 from fmus.errors import UserError
-from fmus.recorder import CsvRecorder
-from fmus.system import ObserverSpec, System
+from fmus.cosim.recorder import CsvRecorder
+from fmus.cosim.system import ObserverSpec, System
 
 
 def make_observer(spec: ObserverSpec, dt: float, where: str):
@@ -45,7 +45,7 @@ def make_observer(spec: ObserverSpec, dt: float, where: str):
 
 
 class ObserverBank:
-    """A :class:`fmus.system.Sink` running every observer of a system and writing estimates.csv."""
+    """A :class:`fmus.cosim.system.Sink` running every observer of a system and writing estimates.csv."""
 
     def __init__(self, system: System, out_csv: Path | None):
         where = str(system.source or system.name)

@@ -66,7 +66,7 @@ def find_experiment(name: str) -> Experiment:
 def load_system(exp: Experiment, variant: str | None, sets: dict | None = None, seed: int | None = None,
                 stop_time: float | None = None, step_size: float | None = None):
     """The experiment's system with its FMUs built, the variant applied and command-line overrides."""
-    from fmus.build import DEFAULT_OUT, build_all
+    from fmus.generate.build import DEFAULT_OUT, build_all
     from fmus.ssp import read_system
 
     if variant is not None and variant not in exp.variants:
@@ -97,8 +97,8 @@ def run_experiment(name: str, variant: str | None = None, out: Path | str | None
                    progress: bool = True, log=sys.stderr) -> dict:
     """Run one variant; writes signals.csv, estimates.csv, metrics.json, plots, report.md into
     ``out`` and returns the metrics."""
-    from fmus.masters import MASTERS, run
-    from fmus.recorder import CsvRecorder
+    from fmus.cosim.masters import MASTERS, run
+    from fmus.cosim.recorder import CsvRecorder
 
     from .observers import ObserverBank
 

@@ -29,7 +29,7 @@ def run_study(name: str, out: Path | str | None = None, scheduler: str | None = 
               master: str = "jacobi", workers: int | None = None, log=sys.stderr, **overrides) -> dict:
     from dask.distributed import Client, LocalCluster, as_completed
 
-    from fmus.build import DEFAULT_OUT, build_all
+    from fmus.generate.build import DEFAULT_OUT, build_all
 
     exp = find_experiment(name)
     if not exp.variants:

@@ -4,7 +4,7 @@ The ``SensorNoise`` FMU turns up to eight true signals (accelerations, angular r
 the vehicle FMUs) into measurements, as the synthetic sensor data of seed 000 (sec. 4.2 and 5:
 "contaminated with the Gaussian white noise of the sensors") and seed 004 (sec. 3, the noise
 r ~ N(0, R) of its measurement equation). Its C code is hand written
-(``fmus/csrc/SensorNoise.c``); ``tests/test_sensors.py`` proves it equals this module bit for bit.
+(``fmus/native/models/SensorNoise.c``); ``tests/test_sensors.py`` proves it equals this module bit for bit.
 
 Measurement equation
 --------------------

@@ -3,7 +3,7 @@ r"""Track irregularity source: ERRI B176 random track + harmonic + step + measur
 The ``TrackIrregularity`` FMU feeds the vehicle models with the rail deviations under each
 of the four wheelsets of a coach running at constant speed ``V`` on straight track. It has
 parameters and outputs only (no states, no inputs); its C code is hand written
-(``fmus/csrc/TrackIrregularity.c``) and ``tests/test_track.py`` proves it equals this module.
+(``fmus/native/models/TrackIrregularity.c``) and ``tests/test_track.py`` proves it equals this module.
 
 Irregularity variables
 ----------------------

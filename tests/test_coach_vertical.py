@@ -7,7 +7,7 @@ import pytest
 from scipy.integrate import solve_ivp
 from scipy.linalg import logm
 
-from fmus.slave import Slave
+from fmus.cosim.slave import Slave
 from models.coach_vertical import (
     COACH_VERTICAL,
     K1_NOMINAL,

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 from fmpy import simulate_fmu
 
-from fmus.build import CFLAGS, validate
-from fmus.slave import FMUError, Slave
+from fmus.generate.build import CFLAGS, validate
+from fmus.cosim.slave import FMUError, Slave
 from models import all_models
 
 MODELS = [m.identifier for m in all_models()]

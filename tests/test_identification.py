@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from estimators import identification as idn
-from fmus.masters import run
-from fmus.system import Component, Connection, System
+from fmus.cosim.masters import run
+from fmus.cosim.system import Component, Connection, System
 from models.vehicle_lateral import VEHICLE_LATERAL
 
 V = 20.0

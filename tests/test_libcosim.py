@@ -11,7 +11,7 @@ How libcosim's fixed-step algorithm (libcosim 0.11, ``fixed_step_algorithm.cpp``
    next step.
 
 So it is a Jacobi scheme: the input used over [t_k, t_k+1] is the source's output at t_k,
-the same as our Jacobi master (:mod:`fmus.masters`). Time is an integer number of nanoseconds; an
+the same as our Jacobi master (:mod:`fmus.cosim.masters`). Time is an integer number of nanoseconds; an
 FMU sees ``t_k = k * h_ns / 1e9`` and the step ``t_k+1 - t_k`` (both as doubles), which
 differ from FMPy's ``k * h`` and ``h`` by an ulp now and then.
 
@@ -62,9 +62,9 @@ from libcosimpy.CosimLogging import CosimLogLevel, log_output_level  # noqa: E40
 from libcosimpy.CosimObserver import CosimObserver  # noqa: E402
 from libcosimpy.CosimSlave import CosimLocalSlave  # noqa: E402
 
-from fmus.masters import run as run_master  # noqa: E402
-from fmus.system import Component, Connection, System  # noqa: E402
-from fmus.slave import Slave  # noqa: E402
+from fmus.cosim.masters import run as run_master  # noqa: E402
+from fmus.cosim.system import Component, Connection, System  # noqa: E402
+from fmus.cosim.slave import Slave  # noqa: E402
 from models.wheelset import WHEELSET  # noqa: E402
 
 STEP_NS = 1_000_000  # 1 ms

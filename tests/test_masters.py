@@ -1,4 +1,4 @@
-"""The three masters of fmus.masters on track -> wheelset (2 s at 1 ms).
+"""The three masters of fmus.cosim.masters on track -> wheelset (2 s at 1 ms).
 
 What is asserted (and measured when this was written):
 
@@ -30,9 +30,9 @@ import pytest
 from fmpy import read_model_description
 
 from fmus.errors import UserError
-from fmus.masters import MASTERS, gauss_seidel_order, run
-from fmus.recorder import ArrayRecorder, CsvRecorder
-from fmus.system import Component, Connection, System
+from fmus.cosim.masters import MASTERS, gauss_seidel_order, run
+from fmus.cosim.recorder import ArrayRecorder, CsvRecorder
+from fmus.cosim.system import Component, Connection, System
 
 TRACK = {"psd_level": 1, "seed": 3, "harmonic_lateral_amplitude": 1e-3, "harmonic_wavelength": 15.66}
 STEP = {"psd_level": 0, "step_lateral": 1e-3, "step_position": 2.0}  # 1 mm at t = 0.1 s (20 m/s)

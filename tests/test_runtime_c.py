@@ -1,4 +1,4 @@
-"""Tests of the shared FMI 2.0 Co-Simulation runtime (fmus/runtime/fmi2_runtime.c).
+"""Tests of the shared FMI 2.0 Co-Simulation runtime (fmus/native/runtime/fmi2_runtime.c).
 
 The runtime is compiled with a small hand-written model (tests/data/oscillator/: a damped
 oscillator dx/dt = v, dv/dt = -k x - c v + u with a first-order-hold input u, rate du) under
@@ -31,7 +31,7 @@ from fmpy.fmi2 import (
 )
 
 ROOT = Path(__file__).resolve().parents[1]
-RUNTIME = ROOT / "fmus" / "runtime"
+RUNTIME = ROOT / "fmus" / "native" / "runtime"
 DATA = ROOT / "tests" / "data" / "oscillator"
 FMI_HEADERS = Path(fmpy.__file__).parent / "c-code"
 CFLAGS = ["-std=c99", "-shared", "-fPIC", "-O2", "-Wall", "-Wextra", "-Werror"]

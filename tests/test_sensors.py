@@ -1,4 +1,4 @@
-"""Sensor noise (models/sensors.py, fmus/csrc/SensorNoise.c): the measurement equation, the
+"""Sensor noise (models/sensors.py, fmus/native/models/SensorNoise.c): the measurement equation, the
 statistics of the counter-based noise, its independence from how an importer steps, and the
 FMU's hand-written C equal to the Python twin bit for bit.
 
@@ -16,10 +16,10 @@ import pytest
 from fmpy import simulate_fmu
 from scipy import stats
 
-from fmus.masters import run
-from fmus.slave import FMUError, Slave
+from fmus.cosim.masters import run
+from fmus.cosim.slave import FMUError, Slave
 from fmus.ssp import read_system
-from fmus.system import Component, Connection, System
+from fmus.cosim.system import Component, Connection, System
 from models.sensors import (
     GAMMA,
     N_CHANNELS,

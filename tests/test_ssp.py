@@ -15,7 +15,7 @@ import pytest
 
 from fmus.errors import UserError
 from fmus.ssp import list_variants, read_system, validate_ssp, write_ssp
-from fmus.ssp_units import OURS, UnitError, Units, conversion, from_ssc
+from fmus.ssp.units import OURS, UnitError, Units, conversion, from_ssc
 
 EXP = Path(__file__).resolve().parents[1] / "experiments" / "track_wheelset"
 

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from fmpy import simulate_fmu
 
-from fmus.slave import Slave
+from fmus.cosim.slave import Slave
 from models.step_source import STEP_SOURCE
 
 

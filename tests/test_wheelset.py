@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from fmus.slave import Slave
+from fmus.cosim.slave import Slave
 from models.wheelset import WHEELSET
 
 STATES = [s.name for s in WHEELSET.states]

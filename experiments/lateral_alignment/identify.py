@@ -3,7 +3,7 @@ filter's Q and R from the same CM run: seed 000 §3.4 (eq. 8) and §4.2 (eqs. 28
 
     python -m experiments.lateral_alignment.identify [--stop-time 20] [--out .../identified.json]
 
-1. Builds the FMUs (fmus.build.build_all; cached).
+1. Builds the FMUs (fmus.generate.build.build_all; cached).
 2. Chooses ``psd_scale`` of the TrackIrregularity (ERRI B176 low level, seed 1) so that the
    alignment under the leading wheelset, band-passed to 3-200 m (estimators.metrics.bandpass),
    has an rms of 1.4 mm over the run (the amplitudes scale linearly with psd_scale).
@@ -37,9 +37,9 @@ import numpy as np
 
 from estimators import identification as idn
 from estimators.metrics import bandpass, rms
-from fmus.build import DEFAULT_OUT, build_all
-from fmus.masters import run
-from fmus.system import Component, Connection, System
+from fmus.generate.build import DEFAULT_OUT, build_all
+from fmus.cosim.masters import run
+from fmus.cosim.system import Component, Connection, System
 from models.track import TrackIrregularity
 from models.vehicle_lateral import VEHICLE_LATERAL
 

@@ -52,7 +52,7 @@ from scipy.optimize import minimize
 from estimators.alignment import AlignmentKalmanFilter
 from estimators.metrics import alignment_errors
 from experiments.runner import find_experiment, load_system
-from fmus.masters import run
+from fmus.cosim.masters import run
 
 from . import BANDS, SENSOR_COLUMNS, START_UP_S
 

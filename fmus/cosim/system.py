@@ -85,7 +85,7 @@ class System:
 def recorded_signals(system: System, variables: dict[str, dict]) -> list[str]:
     """``system.record``, or every Real output of every component in component order;
     ``variables`` maps component names to their FMU variables by name."""
-    from .errors import UserError
+    from ..errors import UserError
 
     if system.record:
         for signal in system.record:

@@ -1,4 +1,4 @@
-"""Sinks for the samples of a run (see :class:`fmus.system.Sink`).
+"""Sinks for the samples of a run (see :class:`fmus.cosim.system.Sink`).
 
 :class:`CsvRecorder` writes ``signals.csv`` as the run goes, so an interrupted or failed run
 leaves a readable file; :class:`ArrayRecorder` keeps the rows in memory (tests, metrics).

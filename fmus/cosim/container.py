@@ -25,7 +25,7 @@ Pitfalls of fmpy 0.3.32 handled here: a connection's ``variableType`` must be ``
 independent ``time`` must be the first model variable (value reference 0) and stay out of
 ``variableMappings``; start values must be strings in ``container.json``.
 
-:func:`load_driver` compiles ``runtime/container_driver.c`` (a loop of doStep + getReal into
+:func:`load_driver` compiles ``fmus/native/runtime/container_driver.c`` (a loop of doStep + getReal into
 a numpy buffer) at first use into a cache folder; without a C compiler the master falls back
 to a ctypes loop.
 """
@@ -63,11 +63,11 @@ from fmpy.model_description import (
     write_model_description,
 )
 
-from .errors import UserError
+from ..errors import UserError
 from .slave import Slave
 from .system import System, recorded_signals
 
-DRIVER_SOURCE = Path(__file__).parent / "runtime" / "container_driver.c"
+DRIVER_SOURCE = Path(__file__).parent.parent / "native" / "runtime" / "container_driver.c"
 
 
 def _literal(var: ModelVariable, value, where: str) -> str:
@@ -190,7 +190,7 @@ def configuration(system: System) -> Configuration:
     md = ModelDescription(
         fmiVersion="2.0", modelName=system.name or "system", instantiationToken=token,
         description=f"railfmu container of {system.name} (FMPy container FMU)",
-        generationTool="railfmu (fmus.container)",
+        generationTool="railfmu (fmus.cosim.container)",
         coSimulation=CoSimulation(modelIdentifier="container_fmu", fixedInternalStepSize=system.step_size),
         defaultExperiment=DefaultExperiment(startTime=repr(system.start_time), stopTime=repr(system.stop_time),
                                             stepSize=repr(system.step_size)),

@@ -19,7 +19,7 @@ import sympy as sp
 
 from models.base import Model, Output, Parameter, Variable
 
-from .units import UNITS, check_unit
+from ..units import UNITS, check_unit
 
 GENERATOR = "railfmu"
 TAU = sp.Symbol("tau", real=True)  # time since the inputs were set (first-order hold)

@@ -9,10 +9,10 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from .errors import UserError
-from .ssp_units import Affine, UnitError, Units, conversion, from_ssc
-from .ssp_xml import NS, SSC_NS, SSV_NS, children, local
-from .system import Value
+from ..errors import UserError
+from .units import Affine, UnitError, Units, conversion, from_ssc
+from .xmltools import NS, SSC_NS, SSV_NS, children, local
+from ..cosim.system import Value
 
 _TRANSFORMS = ("LinearTransformation", "BooleanMappingTransformation", "IntegerMappingTransformation",
                "EnumerationMappingTransformation")

@@ -1,4 +1,4 @@
-"""SSP 1.0 experiments as a :class:`fmus.system.System`: read, check, validate, write back.
+"""SSP 1.0 experiments as a :class:`fmus.cosim.system.System`: read, check, validate, write back.
 
 :func:`read_system` applies what FMPy's own SSP support skips: parameter bindings in the SSD
 (inline and ``.ssv``), ``.ssm`` mappings, ``ssc:LinearTransformation``, unit checks and
@@ -26,8 +26,8 @@ from pathlib import Path
 from fmpy import read_model_description
 from lxml import etree
 
-from .errors import UserError
-from .ssp_params import (
+from ..errors import UserError
+from .params import (
     ParamValue,
     apply_mapping,
     from_cli,
@@ -36,7 +36,7 @@ from .ssp_params import (
     read_parameter_set,
     why_not_settable,
 )
-from .ssp_units import (
+from .units import (
     IDENTITY,
     OURS,
     Affine,
@@ -48,8 +48,8 @@ from .ssp_units import (
     from_ssc,
     tidy,
 )
-from .ssp_write import write_ssp
-from .ssp_xml import (
+from .writer import write_ssp
+from .xmltools import (
     NS,
     SSC_NS,
     Root,
@@ -61,7 +61,7 @@ from .ssp_xml import (
     parse_xml,
     schema_problems,
 )
-from .system import Component, Connection, ObserverSpec, System, Value
+from ..cosim.system import Component, Connection, ObserverSpec, System, Value
 
 __all__ = ["list_variants", "read_system", "validate_ssp", "write_ssp"]
 
@@ -102,9 +102,9 @@ def _variants(root: Root) -> list[str]:
 def validate_ssp(path, fmu_dirs=()) -> list[str]:
     """Every problem found in an SSP: schema errors of each .ssd/.ssv/.ssm, unresolved
     references (the first per variant), and each contained FMU's problems
-    (:func:`fmus.build.validate`). [] if none. Raises only if ``path`` does not exist.
+    (:func:`fmus.generate.build.validate`). [] if none. Raises only if ``path`` does not exist.
     ``fmu_dirs``: where to look for FMUs the SSP does not contain (an experiment folder)."""
-    from .build import validate
+    from ..generate.build import validate
 
     given = Path(path)
     if not given.exists():

@@ -15,7 +15,7 @@ from fmpy.fmi1 import FMICallException
 from fmpy.fmi2 import (FMU2Slave, fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFreeMemoryTYPE,
                        fmi2CallbackFunctions, fmi2CallbackLoggerTYPE)
 
-from .errors import UserError
+from ..errors import UserError
 
 _STATUS = ["OK", "Warning", "Discard", "Error", "Fatal", "Pending"]
 

@@ -1,4 +1,4 @@
-"""A :class:`fmus.system.System` as a self-contained ``.ssp``: ``SystemStructure.ssd`` plus its
+"""A :class:`fmus.cosim.system.System` as a self-contained ``.ssp``: ``SystemStructure.ssd`` plus its
 FMUs in ``resources/``.
 
 What other importers need (libcosim in particular) is kept explicit: every component carries
@@ -17,9 +17,9 @@ from pathlib import Path
 from fmpy import read_model_description
 from lxml import etree
 
-from .errors import UserError
-from .ssp_units import BASE, OURS, Units, from_fmu
-from .ssp_xml import (
+from ..errors import UserError
+from .units import BASE, OURS, Units, from_fmu
+from .xmltools import (
     NS,
     OSP_NS,
     RF_NS,
@@ -29,7 +29,7 @@ from .ssp_xml import (
     one_line,
     schema_problems,
 )
-from .system import System
+from ..cosim.system import System
 
 _KINDS = ("input", "output", "parameter", "calculatedParameter")  # causalities a connector can show
 

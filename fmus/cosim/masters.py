@@ -1,4 +1,4 @@
-"""Fixed-step co-simulation masters for a :class:`fmus.system.System`.
+"""Fixed-step co-simulation masters for a :class:`fmus.cosim.system.System`.
 
 Three masters, one time grid ``t_k = start + k h`` (k = 0 .. n), one sample per grid point
 (n + 1 rows: ``time`` and the recorded signals), handed to the sinks as the run goes:
@@ -19,10 +19,10 @@ Three masters, one time grid ``t_k = start + k h`` (k = 0 .. n), one sample per 
     its output) is refused: Gauss-Seidel does not iterate.
 
 ``container``
-    The system as one FMPy container FMU (:mod:`fmus.container`), stepped by a small C loop
+    The system as one FMPy container FMU (:mod:`fmus.cosim.container`), stepped by a small C loop
     (doStep + getReal into a numpy buffer; a ctypes loop without a C compiler). The
     container couples like Jacobi, and its samples equal the ``jacobi`` master's bit for bit
-    (asserted by tests/test_masters.py); see :mod:`fmus.container`.
+    (asserted by tests/test_masters.py); see :mod:`fmus.cosim.container`.
 
 What a sample at t_k holds, for every master: every FMU has stepped to t_k (Gauss-Seidel:
 with its own coupling); then every connection has been copied from the outputs at t_k
@@ -39,7 +39,7 @@ copy (all FMUs in their initial state, out of Initialization Mode).
 The Python masters call the FMUs' ``fmi2GetReal``/``fmi2SetReal``/``fmi2DoStep`` through
 ctypes with prebuilt arrays (FMPy's wrappers build ctypes arrays on every call), and each
 sample lands straight in the preallocated result array. FMU errors keep the wording of
-:class:`fmus.slave.Slave` (``X.fmu (name): what failed: <what the FMU logged>``).
+:class:`fmus.cosim.slave.Slave` (``X.fmu (name): what failed: <what the FMU logged>``).
 """
 
 from __future__ import annotations
@@ -56,7 +56,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import UserError
+from ..errors import UserError
 from .slave import Slave
 from .system import Connection, Sink, System, recorded_signals
 

@@ -22,9 +22,10 @@ from models.base import Model
 from . import codegen
 
 HERE = Path(__file__).resolve().parent
-RUNTIME_DIR = HERE / "runtime"
-CSRC_DIR = HERE / "csrc"
-DEFAULT_OUT = HERE.parent / "build" / "fmus"
+FMUS = HERE.parent
+RUNTIME_DIR = FMUS / "native" / "runtime"
+CSRC_DIR = FMUS / "native" / "models"
+DEFAULT_OUT = FMUS.parent / "build" / "fmus"
 PLATFORM = "linux64"
 CFLAGS = ["-std=c99", "-O2", "-fPIC", "-shared", "-fvisibility=hidden", "-Wall", "-Wextra", "-Werror"]
 FMI_HEADERS = ["fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h"]
@@ -78,9 +79,9 @@ def definition_key(model: Model) -> str:
     keys give equal FMUs, so a build can be skipped without running the generator (sympy
     takes ~15 s on the full-vehicle model)."""
     h = hashlib.sha256(repr((model.identifier, CFLAGS, os.environ.get("CC", "gcc"))).encode())
-    roots = [HERE.parent / "models", RUNTIME_DIR, CSRC_DIR]
+    roots = [FMUS.parent / "models", RUNTIME_DIR, CSRC_DIR]
     files = [f for r in roots for f in sorted(r.rglob("*")) if f.is_file() and "__pycache__" not in f.parts]
-    files += [HERE / "codegen.py", HERE / "build.py", HERE / "units.py"]
+    files += [HERE / "codegen.py", HERE / "build.py", FMUS / "units.py"]
     for f in files:
         h.update(f.as_posix().encode())
         h.update(f.read_bytes())

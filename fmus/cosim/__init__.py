@@ -1,0 +1,3 @@
+"""Co-simulation: the resolved system (:mod:`.system`), one FMU through FMPy (:mod:`.slave`),
+the master algorithms (:mod:`.masters`; the native fast path in :mod:`.container`) and the
+recorders (:mod:`.recorder`)."""

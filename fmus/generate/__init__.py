@@ -1,0 +1,2 @@
+"""Model definition (``models/``) -> modelDescription.xml + C (:mod:`.codegen`) -> compiled,
+packaged and validated ``.fmu`` (:mod:`.build`)."""
