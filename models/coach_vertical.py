@@ -1,23 +1,23 @@
-"""Vertical 7-DOF coach of seed 004 §2: car body bounce, pitch and roll; bounce and roll of
-each of the two bogies (ERRI B176 benchmark coach, seed 004 Table 1).
+"""Vertical 7-DOF coach of Onat et al. (2016), §2: car body bounce, pitch and roll; bounce
+and roll of each of the two bogies (ERRI B176 benchmark coach, their Table 1).
 
 Coordinates and signs
 ---------------------
 Vertical displacements are absolute, measured upwards from the static equilibrium on a
 perfect track (gravity and the static spring preloads cancel there, so ``g`` does not
-appear: motions about equilibrium, the seed's linearisation "around the operating state").
+appear: motions about equilibrium, the paper's linearisation "around the operating state").
 Bogie 1 is the leading bogie, at ``+a1`` ahead of the car-body centre; bogie 2 at ``-a1``.
 
-    z_c      car-body bounce (m, up)            seed y_1
-    theta_c  car-body pitch (rad): positive when the end over bogie 1 rises   seed phi_z1
-    phi_c    car-body roll (rad): positive when the left side rises           seed phi_x1
-    z_b1/2   bogie bounce (m, up)               seed y_2, y_3
-    phi_b1/2 bogie roll (rad, left side up)     seed phi_x2, phi_x3
+    z_c      car-body bounce (m, up)            paper: y_1
+    theta_c  car-body pitch (rad): positive when the end over bogie 1 rises   paper: phi_z1
+    phi_c    car-body roll (rad): positive when the left side rises           paper: phi_x1
+    z_b1/2   bogie bounce (m, up)               paper: y_2, y_3
+    phi_b1/2 bogie roll (rad, left side up)     paper: phi_x2, phi_x3
 
-(The seed's axes are x along the track, y vertical, z lateral, so its pitch is "around z".)
+(The paper's axes are x along the track, y vertical, z lateral, so its pitch is "around z".)
 
-Suspension (one spring and one damper per side and bogie, seed Table 1 values per element)
---------------------------------------------------------------------------------------
+Suspension (one spring and one damper per side and bogie, Table 1 values per element)
+----------------------------------------------------------------------------------
 Secondary, between car body and bogie i (s_1 = +1, s_2 = -1), on side j (e_L = +1, e_R = -1)
 at lateral distance c1::
 
@@ -30,9 +30,9 @@ vertical irregularity w_ij = z_lI / z_rI (input) and its rate (input)::
     d_p = z_bi + e_j c2 phi_bi - w_ij
     F_p = -k2 d_p - b2 d_p'                 (upwards on the bogie)
 
-The primary damper uses the rail's rate ``dz_l1 .. dz_r2`` (the seed's T_b u' term).
+The primary damper uses the rail's rate ``dz_l1 .. dz_r2`` (the paper's T_b u' term).
 
-Equations of motion (seed eq. 2, M x'' + B x' + K x = T_b u' + T_k u)::
+Equations of motion (the paper's eq. 2, M x'' + B x' + K x = T_b u' + T_k u)::
 
     m1  z_c''      = sum_ij F_s,ij
     Jz1 theta_c''  = a1 sum_j (F_s,1j - F_s,2j)
@@ -41,13 +41,13 @@ Equations of motion (seed eq. 2, M x'' + B x' + K x = T_b u' + T_k u)::
     Jx2 phi_bi''   = -c1 (F_s,iL - F_s,iR) + c2 (F_p,iL - F_p,iR)
 
 The secondary stiffness ``k1`` is an *input* (its start value is Table 1's 430 kN/m), so a
-fault source can change it during a run (seed §4: k1 drops to 50 % at t = 20 s); it is held
-constant over a communication step.
+fault source can change it during a run (the paper's §4: k1 drops to 50 % at t = 20 s); it is
+held constant over a communication step.
 
-Sensors (seed eq. 6 and §3: "low cost inertial sensors", accelerometers and gyros)
---------------------------------------------------------------------------------
+Sensors (the paper's eq. 6 and §3: "low cost inertial sensors", accelerometers and gyros)
+---------------------------------------------------------------------------------------
 Accelerometers measure the vertical translations, gyros the rotations (rates), one set on
-the car body and one on each bogie, seven signals in the seed's order (:data:`SENSORS`)::
+the car body and one on each bogie, seven signals in the paper's order (:data:`SENSORS`)::
 
     ddz_c     car-body vertical acceleration at its centre    (accelerometer)   m/s2
     dtheta_c  car-body pitch rate                             (gyro)            rad/s
@@ -58,10 +58,10 @@ the car body and one on each bogie, seven signals in the seed's order (:data:`SE
     dphi_b2   bogie 2 roll rate                               (gyro)            rad/s
 
 The rates are states (an FMU's states are outputs too); the accelerations are outputs. The
-seed's weighted least squares puts 70 % of the weight on the car-body vertical acceleration
+paper's weighted least squares puts 70 % of the weight on the car-body vertical acceleration
 and roll rate (ddz_c, dphi_c). Accelerations are inertial, without gravity (the static 1 g
 of a real accelerometer is a constant offset removed by the sensor model). Sensor noise is
-not added here: the estimator experiment adds it (seed: R = I, i.e. unit variance in the
+not added here: the estimator experiment adds it (the paper: R = I, i.e. unit variance in the
 units above), so the FMU stays deterministic and its outputs are the true values.
 
 Modes with Table 1 (:func:`natural_frequencies`; undamped / damped Hz, damping ratio)
@@ -71,9 +71,9 @@ bogies: bounce in phase 5.64 / 5.42 (0.28), anti-phase 5.64 / 5.40 (0.28); roll 
 6.95 / 6.57 (0.33), anti-phase 6.97 / 6.60 (0.32). With k1 halved the car-body bounce drops
 to 0.755 Hz (damped): sqrt of the bounce stiffness 4 k1 k2 / (k1 + k2), springs in series.
 
-Deviations from the seed and what is left out
----------------------------------------------
-* The seed prints its state vector, not its matrices (those are in the appendix of its
+Deviations from the paper and what is left out
+----------------------------------------------
+* The paper prints its state vector, not its matrices (those are in the appendix of its
   ref. [8], Gerlici & Lack); the equations above are the standard 7-DOF vertical model with
   that state vector and Table 1's parameters.
 * Table 1 lists a2 (a second "longitudinal semi spacing", 9.5 m) and V = 20 m/s. Bogies
@@ -83,8 +83,8 @@ Deviations from the seed and what is left out
   parameters of this model (:data:`TRACK_GEOMETRY` keeps them for the experiment).
 * In the ERRI B176 benchmark (Iwnicki 1998) the primary vertical stiffness 1220 kN/m and
   damping 4 kN s/m are per axle box (two per side and bogie), and 430 kN/m / 20 kN s/m per
-  air spring; the seed's 7-DOF model has one primary element per side and bogie and we keep
-  its Table 1 values per element, as the seed does.
+  air spring; the paper's 7-DOF model has one primary element per side and bogie and we keep
+  its Table 1 values per element, as the paper does.
 """
 
 from __future__ import annotations
@@ -94,13 +94,13 @@ import sympy as sp
 
 from .base import Input, Model, Output, Parameter, State
 
-T1 = "seed 004 Table 1 (ERRI B176 benchmark coach)"
-K1_NOMINAL = 430e3  # N/m, seed 004 Table 1: start value of the k1 input
+T1 = "Onat et al. (2016), Table 1 (ERRI B176 benchmark coach)"
+K1_NOMINAL = 430e3  # N/m, Onat et al. (2016), Table 1: start value of the k1 input
 
 PARAMETERS = [
     Parameter("m1", "Car-body mass", "kg", 32000.0, source=T1, positive=True),
     Parameter("m2", "Bogie mass (each bogie)", "kg", 2615.0, source=T1, positive=True),
-    Parameter("Jz1", "Car-body pitch moment of inertia (seed: around its lateral z axis)", "kg.m2",
+    Parameter("Jz1", "Car-body pitch moment of inertia (in the paper: around its lateral z axis)", "kg.m2",
               1.97e6, source=T1, positive=True),
     Parameter("Jx1", "Car-body roll moment of inertia", "kg.m2", 56800.0, source=T1, positive=True),
     Parameter("Jx2", "Bogie roll moment of inertia (each bogie)", "kg.m2", 1722.0, source=T1,
@@ -115,9 +115,9 @@ PARAMETERS = [
 ]
 
 # Table 1 entries that set the track input geometry, not the vehicle's equations
-TRACK_GEOMETRY = {"a2": 9.5, "V": 20.0}  # m (bogie semi-distance), m/s (speed); seed 004 Table 1
+TRACK_GEOMETRY = {"a2": 9.5, "V": 20.0}  # m (bogie semi-distance), m/s (speed); Onat et al. (2016), Table 1
 
-# the seed's measurement vector (eq. 6), in its order
+# the paper's measurement vector (eq. 6), in its order
 SENSORS = ("ddz_c", "dtheta_c", "dphi_c", "ddz_b1", "dphi_b1", "ddz_b2", "dphi_b2")
 POSITIONS = ("z_c", "theta_c", "phi_c", "z_b1", "phi_b1", "z_b2", "phi_b2")
 
@@ -199,7 +199,7 @@ def build() -> Model:
     ]
     return Model(
         identifier="CoachVertical",
-        description="Vertical 7-DOF ERRI B176 coach (seed 004): car-body bounce, pitch, roll; bogie "
+        description="Vertical 7-DOF ERRI B176 coach (Onat et al. 2016): car-body bounce, pitch, roll; bogie "
                     "bounce and roll; inputs: rail vertical irregularities under both bogies and the "
                     "secondary stiffness k1",
         parameters=list(PARAMETERS),

@@ -1,7 +1,7 @@
-r"""Complete vehicle model (CM) of seed 000 §3.2/§5: one car body, two bogie frames, four
+r"""Complete vehicle model (CM) of Muñoz et al. (§3.2, §5): one car body, two bogie frames, four
 wheelsets on straight track with irregularities; weakly coupled vertical/lateral dynamics.
 
-The seed validates its simplified model (SM, :mod:`models.wheelset`) against a complete
+The paper validates its simplified model (SM, :mod:`models.wheelset`) against a complete
 multibody model of the ML95 metro car (its ref. [15], Muñoz et al., MSSP 115 (2019)): track-
 relative coordinates, small angles, linear suspensions, knife-edge contact with equivalent
 conicity and Kalker's linear creep, flange contact as an option. This module is that CM,
@@ -23,7 +23,7 @@ centre of gravity moves by ``u + rot x r``::
 
 Bogie 1 leads (``x = +a_b``); wheelsets 1, 2 in bogie 1 at ``+a_w``, ``-a_w`` from its
 centre, 3, 4 in bogie 2. Lateral DOF: lateral, yaw and roll of car body and bogies and
-lateral and yaw of the wheelsets (17, as the 17-DOF model of seed ref. [12]); vertical DOF:
+lateral and yaw of the wheelsets (17, as the 17-DOF model of the paper's ref. [12]); vertical DOF:
 bounce and pitch of car body and bogies (6), so the wheel loads follow the vertical
 irregularities. The wheelsets' vertical position and roll are *kinematic*, imposed by the
 rails (knife-edge contact, no wheel-rail separation)::
@@ -67,7 +67,7 @@ the primary vertical element above that wheel (wheelset inertia neglected)::
 
     Q_js = Q0 - kz_p d_js - cz_p d_js'      d_js: bogie point minus wheelset point (z)
 
-Kalker's linear creep (seed ref. [13]) with load-dependent coefficients: the Hertzian
+Kalker's linear creep (the paper's ref. [13]) with load-dependent coefficients: the Hertzian
 contact-ellipse semi-axes grow as ``Q^(1/3)``, so ``f11, f22 ~ G ab ~ Q^(2/3)``,
 ``f23 ~ G (ab)^(3/2) ~ Q`` and ``f33 ~ G (ab)^2 ~ Q^(4/3)`` (Kalker 1967; Garg & Dukkipati,
 *Dynamics of Railway Vehicle Systems*, 1984, §5.5; the ellipse shape a/b stays fixed
@@ -75,8 +75,8 @@ because the curvatures do)::
 
     f_ik,js = f_ik0 (Q_js / Q0)^n_ik        n = 2/3, 2/3, 1, 4/3  for f11, f22, f23, f33
 
-``f_ik0`` are seed 000 Table 1's values, which Kalker's theory gave at the static wheel load
-of the SM, ``(m + m_f) g / 2`` = 23.99 kN; the CM's ``Q0`` equals it exactly (the suspended
+``f_ik0`` are the values of Muñoz et al., Table 1, which Kalker's theory gave at the static
+wheel load of the SM, ``(m + m_f) g / 2`` = 23.99 kN; the CM's ``Q0`` equals it exactly (the suspended
 mass per wheelset, 3781 kg, is ``m_c/4 + m_b/2``). Creepages as in the SM::
 
     nu_x,js = -s (l psi_wj' / V + alpha e_j / r0),  nu_y,j = y_wj' / V - psi_wj,  nu_sp,j = psi_wj' / V
@@ -99,16 +99,16 @@ Wheelset j: ``m_w y_wj'' = sum_s F_y,js + F_N,j + F_fl,j + primary lateral``,
 
 Rolling radius
 --------------
-Seed 000 Table 1 lists ``r0 = 0.85 m``, the ML95 wheel's *diameter*; the rolling radius is
+Muñoz et al., Table 1, list ``r0 = 0.85 m``, the ML95 wheel's *diameter*; the rolling radius is
 0.425 m (as in the SM). It sets the longitudinal creepage ``alpha e / r0`` (entry 2 of
-``K_d``, seed eq. 16) and the axle-box height.
+``K_d``, the paper's eq. 16) and the axle-box height.
 
-Sensors (seed 000 §4) and other outputs
----------------------------------------
+Sensors (Muñoz et al., §4) and other outputs
+--------------------------------------------
 ``ddy_w1`` axle-box lateral acceleration of wheelset 1, ``dpsi_w1`` its yaw rate (a state),
 ``ddy_b1`` lateral acceleration of bogie frame 1 at the accelerometer, placed at
 ``(sensor_x, 0, sensor_z)`` from the frame's centre of gravity (default: above wheelset 1 at
-axle height; the seed does not give the position, its SM frame sits above the wheelset).
+axle height; the paper does not give the position, its SM frame sits above the wheelset).
 Also ``ddy_c``, the wheel loads ``Q_jL, Q_jR`` and the total lateral contact force ``F_yj``
 on each wheelset (creep + normal + flange).
 
@@ -122,7 +122,7 @@ car body yaw 0.62 (0.71), lower sway 0.66 (0.32), bounce 1.07 (0.14), upper sway
 1.51-1.64 (0.08-0.27), below Klingel's 1.78 Hz for a free wheelset because the primary yaw
 stiffness ties the wheelsets to the bogie frames; bogie bounce 7.2, pitch 8.2, roll 9.5.
 :func:`first_lateral_mode` (lowest lateral mode with damping ratio < 0.25) gives
-f1 = 1.23 Hz, a 16.3 m wavelength at 20 m/s (seed 000 §5.5: 1.277 Hz, 15.66 m). The linear
+f1 = 1.23 Hz, a 16.3 m wavelength at 20 m/s (Muñoz et al., §5.5: 1.277 Hz, 15.66 m). The linear
 critical speed with these parameters lies between 45 and 50 m/s (hunting of the wheelsets).
 """
 
@@ -136,10 +136,10 @@ import sympy as sp
 
 from .base import Input, Model, Output, Parameter, State
 
-T1 = "seed 000 Table 1"
+T1 = "Muñoz et al., Table 1"
 MB = "Manchester benchmark vehicle 1 (Iwnicki, VSD 30 (1998) 295-313)"
 # The metro car is the Manchester benchmark coach scaled in mass so that the suspended mass
-# per wheelset m_c/4 + m_b/2 is seed 000 Table 1's m_f = 3781 kg (the benchmark's is
+# per wheelset m_c/4 + m_b/2 is the m_f = 3781 kg of Muñoz et al., Table 1 (the benchmark's is
 # 32000/4 + 2615/2 = 9307.5 kg); stiffnesses and damping scale alike, so the suspension
 # frequencies of the benchmark are kept.
 S_M = 3781.0 / 9307.5
@@ -151,12 +151,12 @@ def _scaled(value: float) -> float:
 
 
 PARAMETERS = [
-    # wheelsets: seed 000 Table 1
+    # wheelsets: Muñoz et al., Table 1
     Parameter("m_w", "Wheelset mass", "kg", 1109.0, source=T1, positive=True),
     Parameter("I_w", "Wheelset yaw moment of inertia", "kg.m2", 606.0, source=T1, positive=True),
     Parameter("l", "Half distance between the wheel-rail contact points", "m", 0.75, source=T1, positive=True),
     Parameter("r0", "Rolling radius of the centred wheelset", "m", 0.425,
-              source="seed 000 Table 1 lists 0.85 m, the ML95 wheel diameter; radius = 0.85/2", positive=True),
+              source="Muñoz et al., Table 1, list 0.85 m, the ML95 wheel diameter; radius = 0.85/2", positive=True),
     Parameter("alpha", "Equivalent conicity of the wheel treads", "", 0.1, source=T1, min=0.0),
     Parameter("f11", "Kalker longitudinal creep coefficient per wheel at the static load Q0", "N", 5.5e6,
               source=T1, min=0.0),
@@ -165,7 +165,7 @@ PARAMETERS = [
     Parameter("f33", "Kalker spin creep coefficient per wheel at Q0", "N.m2", 15.0, source=T1, min=0.0),
     # car body and bogie frames
     Parameter("m_c", "Car-body mass", "kg", _scaled(32000.0),
-              source=f"{SCALED}; with m_b: m_c/4 + m_b/2 = 3781 kg (seed 000 Table 1 m_f)", positive=True),
+              source=f"{SCALED}; with m_b: m_c/4 + m_b/2 = 3781 kg (Muñoz et al., Table 1, m_f)", positive=True),
     Parameter("Ix_c", "Car-body roll moment of inertia", "kg.m2", _scaled(56.8e3), source=SCALED, positive=True),
     Parameter("Iy_c", "Car-body pitch moment of inertia", "kg.m2", _scaled(1970e3), source=SCALED, positive=True),
     Parameter("Iz_c", "Car-body yaw moment of inertia", "kg.m2", _scaled(1970e3), source=SCALED, positive=True),
@@ -175,7 +175,7 @@ PARAMETERS = [
     Parameter("Iz_b", "Bogie-frame yaw moment of inertia", "kg.m2", _scaled(3067.0), source=SCALED, positive=True),
     # geometry
     Parameter("a_b", "Longitudinal semi-distance of the bogie pivots", "m", 9.5,
-              source="ERRI B176 / Manchester coach (seed 004 Table 1 a1); matches TrackIrregularity's "
+              source="ERRI B176 / Manchester coach (Onat et al. 2016, Table 1, a1); matches TrackIrregularity's "
                      "axle_position defaults (19 m between the bogies)", positive=True),
     Parameter("a_w", "Semi-wheelbase of the bogies", "m", 1.25,
               source="matches TrackIrregularity's axle_position defaults (2.5 m wheelbase; Manchester 2.56 m)",
@@ -183,7 +183,7 @@ PARAMETERS = [
     Parameter("l_s", "Lateral semi-spacing of the primary suspension (axle boxes)", "m", 0.85, source=T1,
               positive=True),
     Parameter("b_s", "Lateral semi-spacing of the secondary suspension (air springs, lateral dampers)", "m", 1.0,
-              source=f"{MB} (seed 004 Table 1 c1)", positive=True),
+              source=f"{MB} (Onat et al. 2016, Table 1, c1)", positive=True),
     Parameter("b_yd", "Lateral semi-spacing of the yaw dampers", "m", 1.3,
               source="assumed: yaw dampers outboard of the air springs (typical bogie layout)", positive=True),
     Parameter("h_c", "Car-body centre of gravity above rail level", "m", 1.6,
@@ -210,18 +210,18 @@ PARAMETERS = [
     Parameter("ky_s", "Secondary lateral stiffness (air spring), per side", "N/m", _scaled(160e3),
               source=f"{SCALED} (160 kN/m)", min=0.0),
     Parameter("kz_s", "Secondary vertical stiffness (air spring), per side", "N/m", _scaled(430e3),
-              source=f"{SCALED} (430 kN/m; seed 004 Table 1 k1)", min=0.0),
+              source=f"{SCALED} (430 kN/m; Onat et al. 2016, Table 1, k1)", min=0.0),
     Parameter("cy_s", "Secondary lateral damping, per side", "N.s/m", _scaled(32e3),
               source=f"{SCALED} (32 kN s/m)", min=0.0),
     Parameter("cz_s", "Secondary vertical damping, per side", "N.s/m", _scaled(20e3),
-              source=f"{SCALED} (20 kN s/m; seed 004 Table 1 b1)", min=0.0),
+              source=f"{SCALED} (20 kN s/m; Onat et al. 2016, Table 1, b1)", min=0.0),
     Parameter("c_yd", "Yaw damper (longitudinal) damping, per side", "N.s/m", _scaled(500e3),
               source="assumed 500 kN s/m, a passenger-coach yaw damper, x s_m", min=0.0),
     Parameter("k_ar", "Anti-roll bar torsional stiffness, per bogie (car body vs bogie roll)", "N.m/rad",
               _scaled(2.5e6), source="assumed 2.5 MN m/rad (coach anti-roll bar) x s_m", min=0.0),
     # contact options and running conditions
     Parameter("flange_contact", "Flange contact: 0 off, 1 on", "", 0, type="Integer", min=0, max=1,
-              source="seed 000 §3.2: flange contact can be simulated; off in seed 000's runs"),
+              source="Muñoz et al., §3.2: flange contact can be simulated; off in their runs"),
     Parameter("k_fl", "Flange contact lateral stiffness (rail + contact)", "N/m", 1.823e7,
               source="Cooperrider's bogie model (True & Kaas-Petersen): k0 = 1.823e7 N/m", min=0.0),
     Parameter("delta_fl", "Flangeway clearance (lateral play before flange contact)", "m", 0.0091,
@@ -230,7 +230,7 @@ PARAMETERS = [
               1.25, source="assumed: above wheelset 1 (a_w), where the SM's frame is"),
     Parameter("sensor_z", "Height of the bogie-1 accelerometer above the frame's centre of gravity", "m",
               -0.125, source="assumed: at axle height (r0 - h_b)"),
-    Parameter("V", "Forward speed", "m/s", 20.0, source="seed 000 §5", positive=True),
+    Parameter("V", "Forward speed", "m/s", 20.0, source="Muñoz et al., §5", positive=True),
     Parameter("g", "Gravitational acceleration", "m/s2", 9.81, source="standard gravity (rounded)", positive=True),
 ]
 
@@ -409,7 +409,7 @@ def build() -> Model:
                        expr=contact[j]) for j in WHEELSETS]
     return Model(
         identifier="VehicleLateral",
-        description="Complete vehicle model (seed 000 CM): car body, 2 bogie frames, 4 wheelsets; lateral, "
+        description="Complete vehicle model (the CM of Muñoz et al.): car body, 2 bogie frames, 4 wheelsets; lateral, "
                     "yaw, roll and bounce/pitch, primary and secondary suspension, Kalker creep with "
                     "load-dependent coefficients, optional flange contact; inputs: rail irregularities "
                     "under each wheelset",
@@ -483,7 +483,7 @@ def lateral_modes(params: Mapping[str, float] | None = None) -> list[tuple[float
 
 def first_lateral_mode(params: Mapping[str, float] | None = None,
                        max_damping: float = 0.25) -> tuple[float, float, str]:
-    """f1 of seed 000 §5.5 (its resonance wavelength is V / f1): the lowest-frequency lightly
+    """f1 of Muñoz et al., §5.5 (its resonance wavelength is V / f1): the lowest-frequency lightly
     damped (damping ratio below ``max_damping``) mode whose energy is mostly lateral, yaw or
     roll."""
     return next(m[:3] for m in _modes(params) if m[3] > 0.5 and m[1] < max_damping)

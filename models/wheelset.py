@@ -1,4 +1,4 @@
-"""Simplified lateral model (SM) of seed 000 §3.3: one wheelset and a suspended frame.
+"""Simplified lateral model (SM) of Muñoz et al., §3.3: one wheelset and a suspended frame.
 
 Generalised coordinates (absolute, in a track frame moving along the ideal centre line at V):
 wheelset lateral displacement y and yaw psi, suspended-frame lateral displacement y_f (the
@@ -20,16 +20,16 @@ wheelset's displacement relative to the rails:
   taken against the stationary rail, so the rail's lateral velocity does not enter it: the
   rate xi' enters only through the first-order hold of xi within a communication step.
 * Gravitational stiffness W alpha / l with W = (m + m_f) g the axle load: each wheel carries
-  W/2, the wheelset rolls by alpha e / l, and the two normal forces lean by that angle. (Seed
-  eq. 16 prints 2 alpha g (m - m_f) / l for this entry of K_d; with the table's masses that is
-  negative, i.e. destabilising, so we take the derivation above.)
+  W/2, the wheelset rolls by alpha e / l, and the two normal forces lean by that angle. (The
+  paper's eq. 16 prints 2 alpha g (m - m_f) / l for this entry of K_d; with the table's
+  masses that is negative, i.e. destabilising, so we take the derivation above.)
 * Primary suspension: per side one longitudinal (kx, cx) and one lateral (ky, cy) element at
-  lateral distance l_s from the wheelset centre; the seed's Table 1 values are per element.
+  lateral distance l_s from the wheelset centre; the paper's Table 1 values are per element.
 * Rolling radius: Table 1 lists r0 = 0.85 m, which is the ML95 metro wheel's *diameter*; the
   rolling radius is 0.425 m and that is the default here (it scales the alpha/r0 yaw
   stiffness, entry 2 of K_d in eq. 16).
 
-Sensors of the seed (§4): wheelset lateral acceleration y'', yaw rate psi', frame lateral
+Sensors of the paper (§4): wheelset lateral acceleration y'', yaw rate psi', frame lateral
 acceleration y_f''; all three are outputs, with the states.
 """
 
@@ -39,7 +39,7 @@ import sympy as sp
 
 from .base import Input, Model, Output, Parameter, State
 
-T1 = "seed 000 Table 1"
+T1 = "Muñoz et al., Table 1"
 
 PARAMETERS = [
     Parameter("m", "Wheelset mass", "kg", 1109.0, source=T1, positive=True),
@@ -48,7 +48,7 @@ PARAMETERS = [
     Parameter("l_s", "Lateral half-spacing of the primary suspension", "m", 0.85, source=T1, positive=True),
     Parameter("alpha", "Equivalent conicity of the wheel treads", "", 0.1, source=T1, min=0.0),
     Parameter("r0", "Rolling radius of the centred wheelset", "m", 0.425,
-              source="seed 000 Table 1 lists 0.85 m, the ML95 wheel diameter; radius = 0.85/2",
+              source="Muñoz et al., Table 1, list 0.85 m, the ML95 wheel diameter; radius = 0.85/2",
               positive=True),
     Parameter("m_f", "Suspended mass carried by the wheelset (1/4 car body + 1/2 bogie frame)", "kg",
               3781.0, source=T1, positive=True),
@@ -60,7 +60,7 @@ PARAMETERS = [
     Parameter("cx", "Primary longitudinal damping, per side", "N.s/m", 1.47e4, source=T1, min=0.0),
     Parameter("ky", "Primary lateral stiffness, per side", "N/m", 4.12e6, source=T1, min=0.0),
     Parameter("cy", "Primary lateral damping, per side", "N.s/m", 1.41e5, source=T1, min=0.0),
-    Parameter("V", "Forward speed", "m/s", 20.0, source="seed 000 §5", positive=True),
+    Parameter("V", "Forward speed", "m/s", 20.0, source="Muñoz et al., §5", positive=True),
     Parameter("g", "Gravitational acceleration", "m/s2", 9.81, source="standard gravity (rounded)",
               positive=True),
 ]
@@ -102,7 +102,7 @@ def build() -> Model:
     ]
     return Model(
         identifier="WheelsetLateral",
-        description="Wheelset + suspended frame lateral model (seed 000 §3.3 SM): linear Kalker "
+        description="Wheelset + suspended frame lateral model (the SM of Muñoz et al., §3.3): linear Kalker "
                     "creep, conical treads, primary suspension; input: track lateral alignment",
         parameters=list(PARAMETERS),
         inputs=[xi, xi_rate],

@@ -1,4 +1,4 @@
-"""The vertical 7-DOF coach FMU (seed 004 §2) against its own Python definition."""
+"""The vertical 7-DOF coach FMU (Onat et al. (2016), §2) against its own Python definition."""
 
 import math
 
@@ -181,7 +181,7 @@ def test_linearisation_matches_the_equations():
     assert not B[i["dz_b2"], j["z_l1"]]
     A_half = COACH_VERTICAL.linearize(u0={"k1": 0.5 * K1_NOMINAL})[0]
     assert A_half[i["dz_c"], i["z_c"]] == pytest.approx(-2 * K1_NOMINAL / P["m1"])
-    # the sensor set: the seed's seven inertial signals are variables of the FMU
+    # the sensor set: the paper's seven inertial signals are variables of the FMU
     names = {v.name for v in COACH_VERTICAL.variables}
     assert set(SENSORS) <= names
 
@@ -198,8 +198,8 @@ def test_step_under_every_wheel_is_static_equilibrium(fmu_dir):
     assert abs(column(rows, "ddz_c")[-1]) < 1e-5
 
 
-def test_seed_fig2_step_response(fmu_dir):
-    """Seed 004 Fig. 2: a 1 mm step under both bogies at t = 1 s. The car body overshoots
+def test_onat2016_fig2_step_response(fmu_dir):
+    """Onat et al. (2016), Fig. 2: a 1 mm step under both bogies at t = 1 s. The car body overshoots
     (lightly damped 1 Hz bounce: about 75 %), peaks about half a period after the step and
     converges to the step value; the stiffly suspended bogie follows within a few tenths of a
     second."""

@@ -1,6 +1,6 @@
 """estimators.identification: the exact first-order-hold SM response against the FMU, recovery
 of known primary-suspension parameters, identification on complete-model (CM) data and the
-Q/R estimate of seed 000 eqs. 28-31."""
+Q/R estimate of Muñoz et al., eqs. 28-31."""
 
 import math
 

@@ -1,10 +1,10 @@
-"""The lateral_alignment experiment (seed 000) end to end through `railfmu`: complete vehicle
+"""The lateral_alignment experiment (Muñoz et al.) end to end through `railfmu`: complete vehicle
 model -> sensors -> alignment filter and smoother, metrics.json keys, and the study's
 properties on a shorter track (CI); the full 400 m study is `slow`.
 
 Measured on the full study (20 s, 400 m, test track seed 39; J_rel filter / smoother):
 standard whole 0.12 / 0.07, D1 0.19 / 0.11, D2 0.12 / 0.04, D3 0.09 / 0.07; all_conditions
-whole 0.17 / 0.19; resonance_case2 J = 0.17 / 0.11 mm. Seed 000: 0.25, 0.48, 0.26, 0.15;
+whole 0.17 / 0.19; resonance_case2 J = 0.17 / 0.11 mm. Muñoz et al.: 0.25, 0.48, 0.26, 0.15;
 0.32; 0.21 mm.
 """
 
@@ -31,7 +31,7 @@ def run(tmp_path, variant, *extra):
 
 def test_reduced_standard_run(tmp_path):
     """10 s (200 m) of the standard condition: every metric the issue names, rank 7, the filter
-    within loose bounds of the seed's J_rel, the smoother better than the filter in every band
+    within loose bounds of the paper's J_rel, the smoother better than the filter in every band
     (measured on 200 m: filter 0.13, 0.19, 0.12, 0.15; smoother 0.06, 0.11, 0.04, 0.04)."""
     m, out = run(tmp_path, "standard", "--stop-time", "10")
     for key in ("J_mm", "J_rel", "J_mm_smoothed"):
@@ -39,8 +39,8 @@ def test_reduced_standard_run(tmp_path):
     assert m["observability_rank"] == 7
     assert m["simulated_seconds"] == 10.0 and m["estimator_seconds"] > 0
     assert 0.8 < m["alignment_rms_3_200_mm"] < 2.0  # ~1.4 mm over 3-200 m (psd_scale)
-    seed = {"whole": 0.25, "D1": 0.48, "D2": 0.26, "D3": 0.15}  # seed Table 2, over 400 m
-    for band, bound in seed.items():
+    paper = {"whole": 0.25, "D1": 0.48, "D2": 0.26, "D3": 0.15}  # Muñoz et al., Table 2, over 400 m
+    for band, bound in paper.items():
         assert m["J_rel"][band] <= 1.5 * bound, band
         assert m["J_rel_smoothed"][band] < m["J_rel"][band], band
     assert m["J_rel"]["whole"] <= 0.2  # the 400 m study: 0.12
@@ -54,10 +54,10 @@ def test_resonance_wavelength_is_v_over_f1_of_the_complete_model():
     f1 = first_lateral_mode()[0]
     text = (EXP / "variants" / "resonance_case2.ssv").read_text()
     assert f'name="track.harmonic_wavelength"><ssv:Real value="{20.0 / f1!r}"' in text
-    assert 1.0 < f1 < 1.5  # seed: 1.277 Hz
+    assert 1.0 < f1 < 1.5  # Muñoz et al.: 1.277 Hz
 
 
-def test_robustness_variants_change_the_filter_or_the_vehicle_as_the_seed_says(fmu_dir):
+def test_robustness_variants_change_the_filter_or_the_vehicle_as_the_paper_says(fmu_dir):
     from fmus.ssp import read_system
 
     def system(v):

@@ -1,4 +1,4 @@
-"""EN 13848 band metrics (estimators/metrics.py): seed 000 eq. 32 on synthetic profiles."""
+"""EN 13848 band metrics (estimators/metrics.py): Muñoz et al., eq. 32, on synthetic profiles."""
 
 import numpy as np
 import pytest
@@ -6,7 +6,7 @@ import pytest
 from estimators.metrics import BANDS, alignment_errors, bandpass, rms
 
 V, DT = 20.0, 1e-3  # a sample every 0.02 m
-S = V * DT * np.arange(20000)  # 400 m, the seed's run
+S = V * DT * np.arange(20000)  # 400 m, the run of Muñoz et al.
 S_LONG = V * DT * np.arange(100000)  # 2 km: the band-pass edge transients last some 100 m
 
 

@@ -1,4 +1,4 @@
-"""The suspension_fault experiment (seed 004) end to end through `railfmu`: SSD wiring (track
+"""The suspension_fault experiment (Onat et al. 2016) end to end through `railfmu`: SSD wiring (track
 under both bogies, the fault source into coach.k1, noisy sensors), both observers, metrics.json
 keys, and the improved estimator's targets. CI runs shortened variants; the full 150 s study
 is `slow`."""
@@ -37,7 +37,7 @@ def test_reduced_run_meets_the_improved_targets(tmp_path, variant):
         assert imp["convergence_time_s"] <= TARGET_CONVERGENCE_S
     else:
         assert imp["detection_delay_s"] <= TARGET_DETECTION_S
-    # the seed's scheme runs and is reported, not held to the targets
+    # the paper's scheme runs and is reported, not held to the targets
     assert metrics["seed_wls"]["k1_est_final"] > 0
     for f in ("k1_estimates.png", "signals.csv", "estimates.csv", "report.md"):
         assert (out / f).is_file()

@@ -1,4 +1,4 @@
-"""The wheelset + suspended-frame FMU against its own Python definition (seed 000 §3.3)."""
+"""The wheelset + suspended-frame FMU against its own Python definition (Muñoz et al., §3.3)."""
 
 import math
 

@@ -1,5 +1,5 @@
 """Identify the SM's primary suspension (kx, cx, ky, cy) against the CM and estimate the alignment
-filter's Q and R from the same CM run: seed 000 §3.4 (eq. 8) and §4.2 (eqs. 28-31).
+filter's Q and R from the same CM run: Muñoz et al., §3.4 (eq. 8) and §4.2 (eqs. 28-31).
 
     python -m experiments.lateral_alignment.identify [--stop-time 20] [--out .../identified.json]
 
@@ -9,10 +9,10 @@ filter's Q and R from the same CM run: seed 000 §3.4 (eq. 8) and §4.2 (eqs. 28
    has an rms of 1.4 mm over the run (the amplitudes scale linearly with psd_scale).
 3. Runs the CM (VehicleLateral) on the container master, 1 ms steps, V = 20 m/s, driven by
    the track's *lateral* irregularity only: alignment_j and alignment_rate_j (j = 1..4) are
-   connected, the vertical inputs keep 0 (seed §3.4: "only the lateral alignment ... has been
-   included in simulations with both models").
+   connected, the vertical inputs keep 0 (the paper's §3.4: "only the lateral alignment ...
+   has been included in simulations with both models").
 4. Identifies kx, cx, ky, cy (estimators.identification.identify_primary) from track.alignment_1,
-   alignment_rate_1 and vehicle.y_w1, psi_w1; then kx, cx alone with ky, cy at seed Table 1.
+   alignment_rate_1 and vehicle.y_w1, psi_w1; then kx, cx alone with ky, cy at the paper's Table 1.
    On this CM the lateral pair (ky, cy) is practically unidentifiable from y and psi: any
    coupling that makes the SM's frame follow the wheelset fits alike (the four-parameter fit
    drifts to ky ~ 300 x Table 1; with ky fixed anywhere in 4e6..1.2e9 N/m the cost changes by
@@ -21,7 +21,7 @@ filter's Q and R from the same CM run: seed 000 §3.4 (eq. 8) and §4.2 (eqs. 28
    filter's model well conditioned); both fits are written.
 5. Estimates Q and R (estimators.identification.estimate_noise) with the identified SM, from the
    CM states mapped onto the filter's state (the frame is the bogie-1 point of the frame
-   accelerometer) and the CM sensors contaminated with the seed's sensor noise (0.01 m/s2,
+   accelerometer) and the CM sensors contaminated with the paper's sensor noise (0.01 m/s2,
    5e-4 rad/s; numpy, seeded).
 6. Writes the JSON and prints a summary.
 """
@@ -49,7 +49,7 @@ DT = 1e-3
 TRACK_SEED = 1
 TARGET_RMS = 1.4e-3  # m, alignment rms in 3-200 m
 BAND = (3.0, 200.0)
-SIGMA_ACC, SIGMA_GYRO = 0.01, 5e-4  # seed §5 sensor noise
+SIGMA_ACC, SIGMA_GYRO = 0.01, 5e-4  # Muñoz et al., §5 sensor noise
 NOISE_SEED = 12345
 IDENTIFIABLE_TOL = 0.02  # relative cost increase accepted for keeping ky, cy at Table 1
 
@@ -133,13 +133,13 @@ def main(argv: list[str] | None = None) -> int:
         **ident.values,
         "initial": ident.initial,
         "fit": {
-            "cost": "NRMSE_y^2 + NRMSE_psi^2 (seed eq. 8 with each channel normalised by its CM rms)",
-            "before": {"cost": ident.cost_before, "J_ls_seed_eq8": ident.J_ls_before, "nrmse": ident.nrmse_before},
-            "after": {"cost": ident.cost_after, "J_ls_seed_eq8": ident.J_ls_after, "nrmse": ident.nrmse_after},
+            "cost": "NRMSE_y^2 + NRMSE_psi^2 (Muñoz et al., eq. 8, with each channel normalised by its CM rms)",
+            "before": {"cost": ident.cost_before, "J_ls_eq8": ident.J_ls_before, "nrmse": ident.nrmse_before},
+            "after": {"cost": ident.cost_after, "J_ls_eq8": ident.J_ls_after, "nrmse": ident.nrmse_after},
             "n_evaluations": ident.n_evaluations, "success": ident.success, "message": ident.message,
             "free": list(ident.free),
             "rms_cm": {"y_m": rms(y_cm), "psi_rad": rms(psi_cm)},
-            "chosen": "kx, cx fitted; ky, cy kept at seed Table 1 (practically unidentifiable: the four-parameter "
+            "chosen": "kx, cx fitted; ky, cy kept at Muñoz et al., Table 1 (practically unidentifiable: the four-parameter "
                       "fit is hardly better)" if keep_lateral else "all four fitted",
             "all_four": full.as_dict(),
             "kx_cx_only": yaw_only.as_dict(),
@@ -177,7 +177,7 @@ def main(argv: list[str] | None = None) -> int:
           + f", cost {full.cost_after:.5g}, NRMSE y {full.nrmse_after['y']:.4f}, psi {full.nrmse_after['psi']:.4f}, "
           f"singular values {', '.join(f'{v:.3g}' for v in full.singular_values)}")
     print(f"kx, cx only: cost {yaw_only.cost_after:.5g}; chosen: {out['fit']['chosen']}")
-    print(f"cost {ident.cost_before:.4g} -> {ident.cost_after:.4g}; seed J_ls {ident.J_ls_before:.4g} -> "
+    print(f"cost {ident.cost_before:.4g} -> {ident.cost_after:.4g}; eq. 8 J_ls {ident.J_ls_before:.4g} -> "
           f"{ident.J_ls_after:.4g}; {ident.n_evaluations} SM evaluations")
     print("filter settings (Q, R from eqs. 28-31): " + ", ".join(f"{k}={v:.4g}" for k, v in noise.settings.items()))
     print("per channel: " + ", ".join(f"{k}={v:.4g}" for k, v in noise.details.items()))

@@ -4,26 +4,26 @@ the one the study is scored on.
     python -m experiments.lateral_alignment.tune [--out .../tuned.json] [--max-evaluations 600]
 
 The study scores on track seed 39 (``parameters/track.ssv``: its band content is the closest
-of seeds 1-60 to the one seed 000's Table 2 implies). The identification (``identify.py``) and
+of seeds 1-60 to the one Table 2 of Muñoz et al. implies). The identification (``identify.py``) and
 this tuning use track seed 1 (``psd_scale`` 0.773 for 1.4 mm over 3-200 m) and another sensor
 noise seed, so the reported numbers are out of sample.
 
 1. Runs the experiment's own system (``SystemStructure.ssd``, variant ``standard``: vertical
    irregularities, sensor noise) on the container master on the training track.
-2. **Filter** (online): the fixed-gain filter with the seed's identified SM, for every pair of
+2. **Filter** (online): the fixed-gain filter with the paper's identified SM, for every pair of
    ``Q_XI`` x ``SIGMA_VIRTUAL``, scored as the study does (estimators.metrics.alignment_errors
    after the 20 m run-in); the pair with the smallest mean J_rel over the four bands (whole,
    D1, D2, D3) is the ``alignment`` observer's.
 
    Why these two: ``q_xi`` sets how fast the filter lets the alignment move, ``sigma_virtual``
-   how hard the zero reading pins the common mode (seed eq. 17). The spectrum-based defaults
+   how hard the zero reading pins the common mode (the paper's eq. 17). The spectrum-based defaults
    of estimators.alignment pin at 305 m and shrink the estimate by 7 % at every wavelength;
    the tuned pair pins at ~0.1 rad/s (~1 km) and lets the sensors carry the 70-200 m band.
 3. **Smoother** (offline): with the tuned pair, the SM's equivalent parameters kx, cx, ky, cy,
    m_f, f11, f22 are fitted (Nelder-Mead in log space from the identified values, three
    restarts with shrinking simplices: the cost is rough) to the
    smallest mean J_rel of the RTS smoother over the four bands; they are the ``smoother``
-   observer's. Why: the seed's identification fits y and psi, which the kinematic mode
+   observer's. Why: the paper's identification fits y and psi, which the kinematic mode
    (1-2 Hz) dominates; the 3-7 Hz response of the 3-DOF SM then differs from the CM's (gain
    1.2-1.5, phase 17-28 deg on the axle-box accelerometer), and the smoother, which leans on
    the model across time, loses to the filter in D1 (0.26 against 0.19; any look-ahead, even
@@ -32,7 +32,7 @@ noise seed, so the reported numbers are out of sample.
    takes f11 to 25 x Kalker's and kx to 3 % of the identified value, i.e. a wheelset that
    yaws almost as it rolls (no longitudinal slip) with little yaw stiffness to the frame.
    The cost is rough (other starts end at other such models, all with a stiff creep
-   coefficient). The online filter keeps the seed's identified SM: with the smoother's model
+   coefficient). The online filter keeps the paper's identified SM: with the smoother's model
    its D1 doubles. The smoother's model is fitted to the nominal vehicle: with the CM's creep
    halved (``kalker_minus50``) it is no better than the filter.
 4. Writes the grid, the fit and the choices to ``tuned.json``; the SSD's settings are copied
