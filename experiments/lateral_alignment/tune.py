@@ -4,9 +4,9 @@ the one the study is scored on.
     python -m experiments.lateral_alignment.tune [--out .../tuned.json] [--max-evaluations 600]
 
 The study scores on track seed 39 (``parameters/track.ssv``: its band content is the closest
-of seeds 1-60 to the one Table 2 of Muñoz et al. implies). The identification (``identify.py``) and
-this tuning use track seed 1 (``psd_scale`` 0.773 for 1.4 mm over 3-200 m) and another sensor
-noise seed, so the reported numbers are out of sample.
+of seeds 1-60 to the one Table 2 of Muñoz et al. implies). The identification
+(``identify.py``) and this tuning use track seed 1 (``psd_scale`` 0.773 for 1.4 mm over
+3-200 m) and another sensor noise seed, so the reported numbers are out of sample.
 
 1. Runs the experiment's own system (``SystemStructure.ssd``, variant ``standard``: vertical
    irregularities, sensor noise) on the container master on the training track.
