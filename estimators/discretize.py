@@ -48,28 +48,21 @@ def _columns(M: np.ndarray | None, n: int, name: str) -> np.ndarray:
     return M
 
 
-def zoh(A: np.ndarray, B: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
+def zoh(A: np.ndarray, B: np.ndarray | None, dt: float) -> tuple[np.ndarray, np.ndarray]:
     """``(Phi, Gamma)`` of ``dx/dt = A x + B u`` with ``u`` held constant over ``dt`` (s):
-    ``x_{k+1} = Phi x_k + Gamma u_k`` (module docstring)."""
-    A = np.asarray(A, dtype=float)
-    n = A.shape[0]
-    B = _columns(B, n, "B")
-    m = B.shape[1]
-    M = np.zeros((n + m, n + m))
-    M[:n, :n] = A
-    M[:n, n:] = B
-    E = sla.expm(M * dt)
-    return E[:n, :n], E[:n, n:]
+    ``x_{k+1} = Phi x_k + Gamma u_k`` (module docstring). ``B`` None: ``Gamma`` is ``(n, 0)``."""
+    Phi, _, _, Gamma = foh(A, None, dt, B_zoh=B)
+    return Phi, Gamma
 
 
-def foh(A: np.ndarray, B: np.ndarray, dt: float, B_rate: np.ndarray | None = None,
+def foh(A: np.ndarray, B: np.ndarray | None, dt: float, B_rate: np.ndarray | None = None,
         B_zoh: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """``(Phi, Gamma, Gamma_rate, Gamma_zoh)`` of ``dx/dt = A x + B u + B_rate r + B_zoh v``
     with ``u`` extrapolated over the step by its rate ``r`` (one rate per column of ``B``;
     ``B_rate`` defaults to no direct effect) and ``v`` held:
     ``x_{k+1} = Phi x_k + Gamma u_k + Gamma_rate r_k + Gamma_zoh v_k`` (module docstring).
-    1-D ``B``/``B_rate``/``B_zoh`` are single columns; ``Gamma_zoh`` is ``(n, 0)`` without
-    ``B_zoh``."""
+    1-D ``B``/``B_rate``/``B_zoh`` are single columns; a missing one gives an ``(n, 0)``
+    ``Gamma``."""
     A = np.asarray(A, dtype=float)
     n = A.shape[0]
     B = _columns(B, n, "B")
@@ -79,7 +72,7 @@ def foh(A: np.ndarray, B: np.ndarray, dt: float, B_rate: np.ndarray | None = Non
         raise ValueError(f"B_rate needs one column per input of B ({m}), not {B_rate.shape[1]}")
     B_zoh = _columns(B_zoh, n, "B_zoh")
     e = B_zoh.shape[1]
-    # block order [x, v, u, r], so the matrix is the one each estimator used to build by hand
+    # block order [x, v, u, r]: the matrix the estimators built by hand, so their results stay bit for bit
     N = n + e + 2 * m
     M = np.zeros((N, N))
     M[:n, :n] = A
