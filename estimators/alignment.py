@@ -233,8 +233,11 @@ class AlignmentKalmanFilter(Observer):
         self.R = np.diag(np.square([s["sigma_acc"], s["sigma_gyro"], s["sigma_acc"], self.sigma_virtual]))
 
         # stationary filter: P^- from the DARE in scaled states (the covariances span ten decades)
-        self.P_prior, self.P_post, self.K, self._S = kalman.steady_state(
-            self.F, self.H, self.Q, self.R, scale=_STATE_SCALE)
+        try:
+            self.P_prior, self.P_post, self.K, self._S = kalman.steady_state(
+                self.F, self.H, self.Q, self.R, scale=_STATE_SCALE)
+        except ValueError as e:
+            raise ValueError(f"AlignmentKalmanFilter: {e}") from None
         if s["P0"] is None:
             self.P0 = self.P_prior.copy()
         else:

@@ -147,6 +147,21 @@ def test_dare_gain_is_the_limit_of_the_riccati_recursion():
     assert np.allclose(kalman.dare_doubling(F, H, Q, R), ss.P_prior, rtol=1e-10, atol=1e-14)
 
 
+def test_solve_dare_falls_back_to_doubling(monkeypatch):
+    """Where scipy's QZ solver gives up (a pole too close to the unit circle), the doubling
+    algorithm answers, in the same scaled states."""
+    F = np.array([[1.0, 1e-3], [0.0, 1.0]])
+    H, Q, R = np.array([[1.0, 0.0]]), np.diag([1e-12, 1e-8]), np.array([[1e-2]])
+    scale = np.array([1e-2, 1e-1])
+    expected = kalman.solve_dare(F, H, Q, R, scale)
+
+    def gives_up(*args, **kwargs):
+        raise np.linalg.LinAlgError("The associated symplectic pencil has eigenvalues too close to the unit circle")
+
+    monkeypatch.setattr(kalman.sla, "solve_discrete_are", gives_up)
+    assert np.allclose(kalman.solve_dare(F, H, Q, R, scale), expected, rtol=1e-9, atol=0)
+
+
 def test_dare_doubling_refuses_an_undetectable_model():
     F = np.diag([1.5, 0.5])
     H = np.array([[0.0, 1.0]])  # the unstable mode is not seen
