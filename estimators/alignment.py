@@ -103,8 +103,9 @@ Smoother (offline, beyond the seed)
 forward filter: ``x^s_k = x^+_k + C_k (x^s_{k+1} - F x^+_k)``, ``C_k = P^+_k F^T (P^-_{k+1})^-1``;
 for the fixed gain the stationary smoother, computed in the modified Bryson-Frazier form
 (:func:`estimators.smoothers.mbf_stationary`: no inverse of ``P^-``, stable whenever the
-filter is); :func:`estimators.smoothers.rts` for the time-varying filter. The filter's estimate of ``xi`` lags (it is causal and its
-bandwidth is set by the slow common-mode pinning); the smoother removes the lag. It leans on
+filter is); :func:`estimators.smoothers.rts` for the time-varying filter. The filter's
+estimate of ``xi`` lags (it is causal and its bandwidth is set by the slow common-mode
+pinning); the smoother removes the lag. It leans on
 the design model across time, so it needs a model that is right over the whole band: on the
 complete vehicle model it runs on its own equivalent SM (experiments/lateral_alignment/tune.py).
 
@@ -298,8 +299,9 @@ class AlignmentKalmanFilter(Observer):
 
         * ``steady_state=True``: the stationary smoother of the fixed-gain filter (constant
           ``C`` from the DARE's :attr:`P_prior` and :attr:`P_post`), computed in the modified
-          Bryson-Frazier form (:func:`estimators.smoothers.mbf_stationary`): the same estimate without inverting
-          ``P^-``, and a backward recursion that is stable whenever the filter is. Like the
+          Bryson-Frazier form (:func:`estimators.smoothers.mbf_stationary`): the same
+          estimate without inverting ``P^-``, and a backward recursion that is stable
+          whenever the filter is. Like the
           fixed gain it would ignore the larger covariance after a gap, records with gaps or
           non-finite rows are smoothed by the time-varying filter's smoother from the same
           stationary start (the forward estimates stay the fixed gain's). One 7x7 product

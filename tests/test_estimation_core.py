@@ -156,7 +156,7 @@ def test_solve_dare_falls_back_to_doubling(monkeypatch):
     expected = kalman.solve_dare(F, H, Q, R, scale)
 
     def gives_up(*args, **kwargs):
-        raise np.linalg.LinAlgError("The associated symplectic pencil has eigenvalues too close to the unit circle")
+        raise np.linalg.LinAlgError("symplectic pencil has eigenvalues too close to the unit circle")
 
     monkeypatch.setattr(kalman.sla, "solve_discrete_are", gives_up)
     assert np.allclose(kalman.solve_dare(F, H, Q, R, scale), expected, rtol=1e-9, atol=0)
