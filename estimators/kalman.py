@@ -24,7 +24,7 @@ Riccati equation (DARE) of the estimation problem::
 solved in scaled states ``x = T x'`` (``T = diag(scale)``, the states' typical magnitudes), by
 scipy's QZ solver first and, where scipy finds the pencil too ill-conditioned (a closed-loop
 pole within ~1e-4 of the unit circle), by the structure-preserving doubling algorithm.
-Why ours: filterpy has no DARE; scipy's alone fails on the alignment filter's weak pinning.
+Why ours: filterpy has no DARE, and scipy's refuses a pencil with a pole that close to the circle.
 """
 
 from __future__ import annotations
