@@ -23,8 +23,8 @@ Centre-referenced form (used here): with the deviations from the centre point
     P_xy = sum_{i>=1} W_i DX_i DY_i^T + c_0 delta_x delta_y^T
 
 (expand ``sum Wc_i (D_i - delta)(D_i - delta)^T`` with ``sum Wc_i D_i = delta``,
-``sum Wc_i = 2 + c_0``). The weights are only 1.7e5 times the *deviations*, which are of the
-size of the spread, so the result no longer depends on where the state lies (the same to
+``sum Wc_i = 2 + c_0``). The large weights now multiply only the deviations, of the size of
+the spread, never ``|Y|``: the result does not depend on where the state lies (the same to
 2e-8 at 50 km as at 0). For Merwe's points ``c_0 = beta - alpha^2`` (1.999999): ``P`` is a
 sum of positive semi-definite terms with positive weights, PSD by construction (the
 textbook sum is PSD only through the cancellation of its -1.7e6 term), and then
