@@ -33,9 +33,9 @@ that common mode and makes the estimate of ``xi`` a high-pass.
 
 Discretisation
 --------------
-Zero-order hold of the autonomous augmented system, ``F = expm(F_c dt)`` (scipy), which is
-exact for the linear model at every dt, and the process noise by Van Loan's method (Van Loan,
-IEEE TAC 23 (1978) 395)::
+Zero-order hold of the autonomous augmented system, ``F = expm(F_c dt)``, which is exact for
+the linear model at every dt, and the process noise by Van Loan's method
+(:func:`estimators.discretize.van_loan`)::
 
     expm([[-F_c, Q_c], [0, F_c^T]] dt) = [[., Phi^-1 Q_d], [0, Phi^T]],   Q_d = Phi (Phi^-1 Q_d)
 
@@ -85,8 +85,9 @@ Seed eqs. 20-26: ``x^- = F x^+``, ``P^- = F P^+ F^T + Q_d``, ``K = P^- H^T (H P^
 ``x^+ = x^- + K (z - H x^-)``, ``P^+ = (I - K H) P^- (I - K H)^T + K R K^T`` (Joseph form).
 
 * ``steady_state=True`` (default): the fixed gain of the stationary filter, from the discrete
-  algebraic Riccati equation (``scipy.linalg.solve_discrete_are`` gives ``P^-``). A step is a
-  few small matrix-vector products.
+  algebraic Riccati equation in scaled states (:func:`estimators.kalman.steady_state`: scipy's
+  QZ solver, the doubling algorithm where the common mode's pole is too close to 1). A step
+  is a few small matrix-vector products.
 * ``steady_state=False``: ``filterpy.kalman.KalmanFilter`` (its ``update`` is the Joseph form)
   from the initial a-priori covariance ``P0``, by default the stationary one (so both
   versions give the same estimates); a cold start (a larger ``P0``) converges slowly, with
@@ -101,9 +102,10 @@ Smoother (offline, beyond the seed)
 :meth:`AlignmentKalmanFilter.smooth` adds the Rauch-Tung-Striebel backward pass to the same
 forward filter: ``x^s_k = x^+_k + C_k (x^s_{k+1} - F x^+_k)``, ``C_k = P^+_k F^T (P^-_{k+1})^-1``;
 for the fixed gain the stationary smoother, computed in the modified Bryson-Frazier form
-(no inverse of ``P^-``, stable whenever the filter is); filterpy's ``rts_smoother`` for the
-time-varying filter. The filter's estimate of ``xi`` lags (it is causal and its
-bandwidth is set by the slow common-mode pinning); the smoother removes the lag. It leans on
+(:func:`estimators.smoothers.mbf_stationary`: no inverse of ``P^-``, stable whenever the
+filter is); :func:`estimators.smoothers.rts` for the time-varying filter. The filter's
+estimate of ``xi`` lags (it is causal and its bandwidth is set by the slow common-mode
+pinning); the smoother removes the lag. It leans on
 the design model across time, so it needs a model that is right over the whole band: on the
 complete vehicle model it runs on its own equivalent SM (experiments/lateral_alignment/tune.py).
 
@@ -122,14 +124,14 @@ from __future__ import annotations
 import math
 from typing import Any, ClassVar
 
-import control
 import numpy as np
-import scipy.linalg as sla
 from filterpy.kalman import KalmanFilter
 
 from models import track
 from models.wheelset import WHEELSET
 
+from . import kalman, smoothers
+from .discretize import van_loan
 from .observer import Observer
 
 STATES = ("y", "psi", "y_f", "dy", "dpsi", "dy_f", "xi")
@@ -151,15 +153,6 @@ def sigma_virtual_from_spectrum(q_xi: float, V: float, dt: float) -> float:
     return math.sqrt(q_xi / dt) / (V * track.OMEGA_R)
 
 
-def _spd_inv(P: np.ndarray) -> np.ndarray:
-    """Inverse of a symmetric positive definite matrix whose diagonal spans many decades:
-    Cholesky of the correlation matrix ``D^-1 P D^-1`` (``D = sqrt(diag P)``), then rescaled."""
-    d = 1.0 / np.sqrt(np.diag(P))
-    corr = P * np.outer(d, d)
-    inv = sla.cho_solve(sla.cho_factor(0.5 * (corr + corr.T)), np.eye(P.shape[0]))
-    return inv * np.outer(d, d)
-
-
 def _as_bool(value: Any, name: str) -> bool:
     """A boolean setting, also from the text of an SSD annotation ("true"/"false")."""
     if isinstance(value, str):
@@ -173,60 +166,6 @@ def _as_bool(value: Any, name: str) -> bool:
 
 #: typical magnitudes of the states (m, rad, m, m/s, rad/s, m/s, m) to balance the DARE
 _STATE_SCALE = np.array([1e-2, 1e-4, 1e-2, 1e-3, 1e-3, 1e-3, 1e-2])
-
-
-def _dare_doubling(F: np.ndarray, H: np.ndarray, Q: np.ndarray, R: np.ndarray, tol: float = 1e-13,
-                   max_iter: int = 100) -> np.ndarray:
-    """``P^-`` by the structure-preserving doubling algorithm (Chu, Fan, Lin & Wang, Linear
-    Algebra Appl. 396 (2005) 55): with ``A = F^T``, ``G = H^T R^-1 H``, ``X_0 = Q``::
-
-        W = I + G_k X_k,  A+ = A W^-1 A,  G+ = G + A W^-1 G A^T,  X+ = X + A^T X W^-1 A
-
-    ``X_k`` covers ``2^k`` Riccati steps, so a closed-loop pole at 1 - 5e-5 needs ~20
-    iterations."""
-    n = F.shape[0]
-    A, G, X = F.T.copy(), H.T @ np.linalg.solve(R, H), Q.copy()
-    for _ in range(max_iter):
-        W = np.eye(n) + G @ X
-        WA, WG = np.linalg.solve(W, A), np.linalg.solve(W, G)
-        X_new = X + A.T @ X @ WA
-        A, G = A @ WA, G + A @ WG @ A.T
-        X_new = 0.5 * (X_new + X_new.T)
-        done = np.abs(X_new - X).max() <= tol * np.abs(X_new).max()
-        X = X_new
-        if done:
-            return X
-    raise ValueError("AlignmentKalmanFilter: the Riccati equation did not converge (is the model detectable?)")
-
-
-def solve_filter_dare(F: np.ndarray, H: np.ndarray, Q: np.ndarray, R: np.ndarray) -> np.ndarray:
-    """A-priori covariance ``P^-`` of the stationary filter, ``P = F (P - P H^T (H P H^T +
-    R)^-1 H P) F^T + Q``, solved in scaled states ``x = T x'`` (``T`` =
-    :data:`_STATE_SCALE`): the covariances span ten decades. scipy's
-    ``solve_discrete_are`` (QZ) first; where it reports the pencil as too ill-conditioned (the
-    common mode's closed-loop pole lies within 1e-4 of the unit circle for weak pinning or
-    longer steps), the doubling algorithm."""
-    T = np.diag(_STATE_SCALE)
-    Ti = np.linalg.inv(T)
-    Fs, Hs, Qs = Ti @ F @ T, H @ T, Ti @ Q @ Ti.T
-    try:
-        Ps = sla.solve_discrete_are(Fs.T, Hs.T, Qs, R)
-    except (ValueError, np.linalg.LinAlgError):
-        Ps = _dare_doubling(Fs, Hs, Qs, R)
-    return T @ (0.5 * (Ps + Ps.T)) @ T
-
-
-def van_loan(F_c: np.ndarray, Q_c: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
-    """(Phi, Q_d) of ``dx = F_c x + w``, ``E[w w^T] = Q_c delta``, sampled at ``dt``."""
-    n = F_c.shape[0]
-    M = np.zeros((2 * n, 2 * n))
-    M[:n, :n] = -F_c
-    M[:n, n:] = Q_c
-    M[n:, n:] = F_c.T
-    E = sla.expm(M * dt)
-    Phi = E[n:, n:].T
-    Q_d = Phi @ E[:n, n:]
-    return Phi, 0.5 * (Q_d + Q_d.T)
 
 
 class AlignmentKalmanFilter(Observer):
@@ -294,12 +233,12 @@ class AlignmentKalmanFilter(Observer):
         self.F, self.Q = van_loan(F_c, Q_c, self.dt)
         self.R = np.diag(np.square([s["sigma_acc"], s["sigma_gyro"], s["sigma_acc"], self.sigma_virtual]))
 
-        # stationary filter: P^- from the DARE of the dual (estimation) problem
-        self.P_prior = solve_filter_dare(self.F, self.H, self.Q, self.R)
-        S = self.H @ self.P_prior @ self.H.T + self.R
-        self.K = np.linalg.solve(S, self.H @ self.P_prior).T
-        I_KH = np.eye(7) - self.K @ self.H
-        self.P_post = I_KH @ self.P_prior @ I_KH.T + self.K @ self.R @ self.K.T
+        # stationary filter: P^- from the DARE in scaled states (the covariances span ten decades)
+        try:
+            self.P_prior, self.P_post, self.K, self._S = kalman.steady_state(
+                self.F, self.H, self.Q, self.R, scale=_STATE_SCALE)
+        except ValueError as e:
+            raise ValueError(f"AlignmentKalmanFilter: {e}") from None
         if s["P0"] is None:
             self.P0 = self.P_prior.copy()
         else:
@@ -360,14 +299,15 @@ class AlignmentKalmanFilter(Observer):
 
         * ``steady_state=True``: the stationary smoother of the fixed-gain filter (constant
           ``C`` from the DARE's :attr:`P_prior` and :attr:`P_post`), computed in the modified
-          Bryson-Frazier form (:meth:`_mbf_backward`): the same estimate without inverting
-          ``P^-``, and a backward recursion that is stable whenever the filter is. Like the
+          Bryson-Frazier form (:func:`estimators.smoothers.mbf_stationary`): the same
+          estimate without inverting ``P^-``, and a backward recursion that is stable
+          whenever the filter is. Like the
           fixed gain it would ignore the larger covariance after a gap, records with gaps or
           non-finite rows are smoothed by the time-varying filter's smoother from the same
           stationary start (the forward estimates stay the fixed gain's). One 7x7 product
           per step.
-        * ``steady_state=False``: ``filterpy.kalman.KalmanFilter.rts_smoother`` on the
-          filtered means and covariances of every grid point (the time-varying ``C_k``).
+        * ``steady_state=False``: :func:`estimators.smoothers.rts` on the filtered means and
+          covariances of every grid point (the time-varying ``C_k``).
 
         For the time-varying filter ``(P^-)^{-1}`` is applied through the Cholesky factor of
         the correlation matrix ``D^{-1} P^- D^{-1}`` (``D = sqrt(diag P^-)``): ``P^-`` spans
@@ -429,7 +369,7 @@ class AlignmentKalmanFilter(Observer):
         self.last_filtered = X[rows]
 
         if self.steady_state and n_grid == n and ok.all():
-            Xs = self._mbf_backward(X, NU)
+            Xs = smoothers.mbf_stationary(X, NU, self.F, self.H, self.K, self._S, self.P_post)
         elif self.steady_state:
             # a gap or a NaN row: the covariance is no longer the stationary one, and the
             # stationary smoother would turn the large innovation after the gap into a large
@@ -438,33 +378,8 @@ class AlignmentKalmanFilter(Observer):
             twin = type(self)(self.dt, **{**self.settings, "steady_state": False})
             return twin.smooth(t, Z)
         else:
-            Xs = self._kf.rts_smoother(X, P, inv=_spd_inv)[0]
+            Xs = smoothers.rts(X, P, self.F, self.Q)[0]
         return Xs[rows]
-
-    def _mbf_backward(self, X: np.ndarray, NU: np.ndarray) -> np.ndarray:
-        """Backward pass of the stationary smoother in the modified Bryson-Frazier form
-        (Bierman, Factorization Methods for Discrete Sequential Estimation, 1977, ch. X), for
-        a record where every grid point was updated (filtered ``X``, innovations ``NU``)::
-
-            lam~_k = -H^T S^-1 nu_k + (I - K H)^T lam^_k
-            lam^_{k-1} = F^T lam~_k,   lam^_N = 0,   x^s_k = x^+_k - P^+ lam^_k
-
-        It is the RTS smoother rearranged (the same estimate), but its backward recursion runs
-        on ``((I - K H) F)^T``, the transpose of the filter's own closed-loop matrix: stable
-        whenever the filter is. RTS's ``C = P^+ F^T (P^-)^{-1}`` needs the inverse of a
-        covariance that spans ten decades; its spectral radius (1 - 5e-5 in theory, the
-        common mode) came out above 1 for weakly pinned settings, and the backward pass
-        diverged."""
-        F, H, K, Pp = self.F, self.H, self.K, self.P_post
-        S = H @ self.P_prior @ H.T + self.R
-        W = NU @ np.linalg.solve(S, H)  # (H^T S^-1 nu_k)^T per grid point
-        A_upd = np.eye(7) - K @ H  # lam @ A_upd = (I - K H)^T lam
-        Xs = np.empty_like(X)
-        lam = np.zeros(7)
-        for j in range(X.shape[0] - 1, -1, -1):
-            Xs[j] = X[j] - Pp @ lam
-            lam = F.T @ (lam @ A_upd - W[j])
-        return Xs
 
     # -- diagnostics -------------------------------------------------------------------------
     @property
@@ -474,6 +389,8 @@ class AlignmentKalmanFilter(Observer):
 
     def observability_rank(self) -> int:
         """Rank of the observability matrix of (F, H) (seed eq. 27); 7 = observable."""
+        import control  # 2.7 s to import: only when asked
+
         return int(np.linalg.matrix_rank(control.obsv(self.F, self.H)))
 
     def finish(self) -> dict:

@@ -14,7 +14,8 @@ SM response (:func:`sm_response`)
 The FMU holds its input over a communication step ``h`` to first order,
 ``xi(t_k + tau) = xi_k + xi_rate_k tau`` (``models.base.Model._substitute_held_inputs``), and
 integrates with RK4 at 1e-4 s. The exact solution of that is the matrix exponential of the
-augmented system ``[x, xi, r]`` with ``d xi/dt = r``, ``dr/dt = 0``::
+augmented system ``[x, xi, r]`` with ``d xi/dt = r``, ``dr/dt = 0``
+(:func:`estimators.discretize.foh`)::
 
     expm([[A, B_xi, B_rate], [0, 0, 1], [0, 0, 0]] h) = [[Phi, G0, G1], ...]
     x_{k+1} = Phi x_k + G0 xi_k + G1 xi_rate_k
@@ -82,12 +83,14 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 
 import numpy as np
-import scipy.linalg as sla
 import sympy as sp
 from scipy.optimize import least_squares
 from scipy.signal import lfilter
 
 from models.wheelset import WHEELSET
+
+from .discretize import foh, zoh
+from .metrics import rms
 
 P_OPT = ("kx", "cx", "ky", "cy")
 AUGMENTED_STATES = ("y", "psi", "y_f", "dy", "dpsi", "dy_f", "xi")
@@ -128,19 +131,6 @@ def sm_matrices(params: Mapping[str, float] | None = None) -> tuple[np.ndarray, 
     return np.asarray(A, dtype=float), np.asarray(B, dtype=float)
 
 
-def foh_discretise(A: np.ndarray, B: np.ndarray, h: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(Phi, G0, G1): exact step ``h`` with the input held to first order,
-    ``x_{k+1} = Phi x_k + G0 xi_k + G1 xi_rate_k`` (``B`` columns: xi, xi_rate)."""
-    n = A.shape[0]
-    M = np.zeros((n + 2, n + 2))
-    M[:n, :n] = A
-    M[:n, n] = B[:, 0]
-    M[:n, n + 1] = B[:, 1]
-    M[n, n + 1] = 1.0  # d xi / dt = r
-    E = sla.expm(M * h)
-    return E[:n, :n], E[:n, n], E[:n, n + 1]
-
-
 def _uniform_step(t: np.ndarray) -> float:
     t = np.asarray(t, dtype=float)
     if t.ndim != 1 or t.size < 2:
@@ -162,7 +152,9 @@ def sm_states(params: Mapping[str, float] | None, t: np.ndarray, xi: np.ndarray,
     if xi.shape != np.shape(t) or xi_rate.shape != np.shape(t):
         raise ValueError("xi and xi_rate must have the shape of t")
     A, B = sm_matrices(params)
-    Phi, G0, G1 = foh_discretise(A, B, h)
+    # B's columns are xi and xi_rate: xi extrapolated with its rate (the FMU's hold)
+    Phi, G0, G1, _ = foh(A, B[:, 0], h, B_rate=B[:, 1])
+    G0, G1 = G0[:, 0], G1[:, 0]
     lam, W = np.linalg.eig(Phi)
     Winv = np.linalg.inv(W)
     # modal inputs u_k = W^-1 (G0 xi_k + G1 r_k); z_{k+1} = lam z_k + u_k, z_0 = 0
@@ -179,10 +171,6 @@ def sm_response(params: Mapping[str, float] | None, t: np.ndarray, xi: np.ndarra
     updates the WHEELSET defaults (any parameter, e.g. kx, cx, ky, cy, V)."""
     x = sm_states(params, t, xi, xi_rate)
     return x[:, _STATE_NAMES.index("y")], x[:, _STATE_NAMES.index("psi")]
-
-
-def _rms(x: np.ndarray) -> float:
-    return float(np.sqrt(np.mean(np.square(x))))
 
 
 @dataclass
@@ -238,7 +226,7 @@ def identify_primary(t: np.ndarray, xi: np.ndarray, xi_rate: np.ndarray, y_cm: n
     p0.update({k: float(v) for k, v in (initial or {}).items() if k in P_OPT})
     if any(not (v > 0) for v in p0.values()):
         raise ValueError(f"identify_primary: initial values must be positive, not {p0}")
-    sy, spsi = _rms(y_cm), _rms(psi_cm)
+    sy, spsi = rms(y_cm), rms(psi_cm)
     if not (sy > 0 and spsi > 0):
         raise ValueError("identify_primary: the CM response is zero (no excitation?)")
     free = tuple(free)
@@ -260,7 +248,7 @@ def identify_primary(t: np.ndarray, xi: np.ndarray, xi_rate: np.ndarray, y_cm: n
     def scores(theta):
         y, psi = simulate(theta)
         ey, epsi = y - y_cm, psi - psi_cm
-        nrmse = {"y": _rms(ey) / sy, "psi": _rms(epsi) / spsi}
+        nrmse = {"y": rms(ey) / sy, "psi": rms(epsi) / spsi}
         return nrmse["y"] ** 2 + nrmse["psi"] ** 2, float(np.mean(ey**2 + epsi**2)), nrmse
 
     theta0 = np.log([p0[k] for k in free])
@@ -330,7 +318,7 @@ def estimate_noise(t: np.ndarray, states: np.ndarray, sensors: np.ndarray,
     if not (np.all(np.isfinite(X)) and np.all(np.isfinite(Z))):
         raise ValueError("estimate_noise: non-finite states or sensors")
     F_c, H = filter_matrices({**(params or {}), "V": V})
-    F = sla.expm(F_c * dt)
+    F = zoh(F_c, None, dt)[0]
     ex = X[1:] - X[:-1] @ F.T  # eq. 28
     Q = ex.T @ ex / ex.shape[0]  # eq. 29
     Zfull = np.column_stack([Z, np.zeros(Z.shape[0])])  # the virtual reading xi = 0

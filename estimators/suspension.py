@@ -31,7 +31,7 @@ experiment: the track FMU's outputs, as a track recording would give them).
 
 Discretisation (both): exact for the FMU's input hold. The coach FMU extrapolates every rail
 height linearly with its rate over a communication step (first-order hold) and holds the
-rate, so one matrix exponential of ::
+rate, so one matrix exponential of (:func:`estimators.discretize.foh`) ::
 
     [[A(k1), Bz, Bd], [0, 0, I], [0, 0, 0]] dt
 
@@ -58,11 +58,12 @@ import math
 from typing import Any, ClassVar
 
 import numpy as np
-import scipy.linalg as sla
 from filterpy.kalman import KalmanFilter
 
 from models.coach_vertical import COACH_VERTICAL, SENSORS
 
+from . import kalman
+from .discretize import foh
 from .observer import Observer
 
 #: rail inputs of the observers (bogie 1 = leading), then their rates
@@ -126,16 +127,9 @@ class DesignModel:
         """``(F, G, g)``: ``x_{k+1} = F x_k + G [w_k, dw_k]`` under the FMU's hold, and, if
         ``column`` (14,) is given, ``g = int_0^dt expm(A s) ds column`` (the response to
         ``column`` held over the step: a sensitivity, see the observers)."""
-        e = 0 if column is None else 1
-        n = 14 + e + 8
-        M = np.zeros((n, n))
-        M[:14, :14] = self.A0 + k1 * self.A1
-        if e:
-            M[:14, 14] = column
-        M[:14, 14 + e:] = self.B
-        M[14 + e:18 + e, 18 + e:] = np.eye(4)
-        E = sla.expm(M * dt)
-        return E[:14, :14], E[:14, 14 + e:], (E[:14, 14] if e else None)
+        # the rails ramp with their rates (B[:, :4] heights, B[:, 4:] rates); the column is held
+        F, Gz, Gd, g = foh(self.A0 + k1 * self.A1, self.B[:, :4], dt, B_rate=self.B[:, 4:], B_zoh=column)
+        return F, np.hstack([Gz, Gd]), (None if column is None else g[:, 0])
 
 
 def _sigmas(settings: dict[str, Any]) -> np.ndarray:
@@ -401,10 +395,10 @@ class SuspensionJoint(_CoachObserver):
     Prediction: the exact discretisation at the current ``theta`` (module docstring), so the
     predicted state is exact for a constant ``k1``; its Jacobian is ``[[F, g], [0, 1]]`` with
     ``g`` the response to ``k1_initial A1 x`` held over the step (from the same matrix
-    exponential). Update: ``H_a = [H(theta), k1_initial H1 x^-]``, Joseph form, symmetric P.
-    Written here, not with filterpy's ``ExtendedKalmanFilter``: its prediction is
-    ``F x + B u`` and would have to be overridden anyway, and its update deep-copies each row;
-    the update below is the same Joseph form.
+    exponential). Update: ``H_a = [H(theta), k1_initial H1 x^-]``, Joseph form, symmetric P
+    (:func:`estimators.kalman.update` with ``h(x^-)`` as the predicted measurement).
+    Not filterpy's ``ExtendedKalmanFilter``: its prediction is ``F x + B u`` and would have to
+    be overridden anyway, and its update deep-copies each row.
 
     Why it does better than the seed's scheme: ``theta`` gets the Kalman gain from its
     covariance with the states instead of a hand-tuned fixed step, so it is fast while
@@ -470,8 +464,7 @@ class SuspensionJoint(_CoachObserver):
         Fa[:14, :14] = F
         Fa[:14, 14] = g
         x[:14] = F @ x[:14] + G @ self._u
-        P = Fa @ self._P @ Fa.T + self.Q
-        self._P = 0.5 * (P + P.T)
+        self._P = kalman.predict_covariance(self._P, Fa, self.Q)
         self._hold_rails()
 
     def _update(self, z: np.ndarray) -> None:
@@ -482,15 +475,8 @@ class SuspensionJoint(_CoachObserver):
         Ha = np.empty((7, 15))
         Ha[:, :14] = H
         Ha[:, 14] = ks * (m.H1 @ x[:14])
-        r = z[:7] - (H @ x[:14] + m.Du @ self._u)
-        P = self._P
-        PHt = P @ Ha.T
-        S = Ha @ PHt + self.R
-        K = np.linalg.solve(S, PHt.T).T
-        self._x = x + K @ r
-        I_KH = self._I - K @ Ha
-        P = I_KH @ P @ I_KH.T + K @ self.R @ K.T
-        self._P = 0.5 * (P + P.T)
+        up = kalman.update(x, self._P, z[:7], Ha, self.R, z_pred=H @ x[:14] + m.Du @ self._u)
+        self._x, self._P = up.x, up.P
         self._x[14] = max(self._x[14], self.theta_min)
 
     def _estimate(self) -> np.ndarray:
