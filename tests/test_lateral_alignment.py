@@ -48,6 +48,7 @@ def test_reduced_standard_run(tmp_path):
         assert (out / f).is_file(), f
     report = (out / "report.md").read_text()
     assert "Identification" in report and "seed 000" in report
+    assert "## Offline observer `smoother`" in report and "## Observer `smoother`" not in report
 
 
 def test_resonance_wavelength_is_v_over_f1_of_the_complete_model():
