@@ -292,3 +292,23 @@ def test_unit_mismatch_is_one_line_naming_observer_channel_and_units(fmu_dir, tm
     system = system_of(tmp_path, fmu_dir, observer(v="wheelset.dpsi"))
     with pytest.raises(UserError, match=r"input 'v' is in 'm' \(m\) but wheelset.dpsi is in 'rad/s'"):
         ObserverBank(system, None)
+
+
+def test_export_keeps_the_observer_declarations(fmu_dir, tmp_path):
+    """samplePeriod, sampling, offline, valid flags and the units given on SSD connectors survive
+    `railfmu export` (the .ssp is schema-valid and reads back to the same specs)."""
+    from fmus.ssp import validate_ssp, write_ssp
+
+    obs = (observer(attrs='samplePeriod="0.005" sampling="event"', valid='valid="flag.y"')
+           + observer(name="mean", cls="RecordMean", v="", attrs='offline="true"', truth=""))
+    system = system_of(tmp_path, fmu_dir, obs)
+    archive = write_ssp(system, tmp_path / "bank.ssp")
+    assert validate_ssp(archive) == []
+    again = read_system(archive)
+    for a, b in zip(system.observers, again.observers, strict=True):
+        assert (a.name, a.cls, a.measurements, a.inputs, a.valid, a.truth, a.period, a.event, a.offline) == \
+               (b.name, b.cls, b.measurements, b.inputs, b.valid, b.truth, b.period, b.event, b.offline)
+        assert {k: (u.name, u.exponents) for k, u in a.units.items()} == \
+               {k: (u.name, u.exponents) for k, u in b.units.items()}
+    assert again.observers[0].units["sensors.y_1"].factor == 1e-3  # mm/s2, defined in the exported ssd:Units
+    ObserverBank(again, None)  # the unit checks pass on the exported system
