@@ -42,6 +42,23 @@ def test_run_csv_equals_run(recorded):
         kf.run_csv(csv_path)  # the CSV names are wheelset.ddy, ...: no column 'ddy'
 
 
+def test_run_csv_empty_cell_is_a_missing_channel(recorded, tmp_path):
+    """A measured record replayed from CSV: an empty cell is a missing channel, as NaN."""
+    t, Z, _, csv_path = recorded
+    lines = csv_path.read_text().splitlines()
+    col = lines[0].split(",").index("wheelset.dpsi")
+    cells = lines[51].split(",")
+    cells[col] = ""
+    lines[51] = ",".join(cells)  # row 50 of the data
+    gappy = tmp_path / "gappy.csv"
+    gappy.write_text("\n".join(lines) + "\n")
+    kf = AlignmentKalmanFilter(DT)
+    _, X = kf.run_csv(gappy, columns=COLUMNS)
+    Z_nan = Z.copy()
+    Z_nan[50, 1] = np.nan
+    assert np.array_equal(X, AlignmentKalmanFilter(DT).run(t, Z_nan)) and kf.partial == 1
+
+
 @pytest.mark.parametrize("steady_state", [True, False])
 def test_missing_channels_are_left_out(recorded, steady_state):
     """One sensor missing: updated with the others; all missing: a prediction only, the same
