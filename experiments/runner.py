@@ -187,8 +187,8 @@ def _report(exp: Experiment, system, metrics: dict, plots: list[str], out: Path)
                 rel = f"{v['rel_error']:.3f}" if v["rel_error"] is not None else "-"
                 L.append(f"| {est} | {v['rms_error']:.4g} | {v['rms_truth']:.4g} | {rel} |")
         L.append(f"\nErrors after t = {next((v['from_time_s'] for v in m.values() if isinstance(v, dict)), 0):g} s "
-                 "(the first 10 % of the run is the filter's transient)."
-                 + (f" Written to estimates_{name}.csv." if m.get("offline") else ""))
+                 + ("(the first 10 % of the run left out, as for the online filters). Written to "
+                    f"estimates_{name}.csv." if m.get("offline") else "(the first 10 % of the run is the filter's transient)."))
     L += ["", "## Signals (rms)", "", "| signal | rms |", "|---|---|"]
     L += [f"| {k} | {v:.4g} |" for k, v in metrics["rms"].items()]
     if metrics["warnings"] or metrics["notes"]:
