@@ -94,8 +94,10 @@ Seed eqs. 20-26: ``x^- = F x^+``, ``P^- = F P^+ F^T + Q_d``, ``K = P^- H^T (H P^
   the slowest closed-loop pole (about 0.1 1/s at the defaults): the common mode is pinned
   only by the virtual reading.
 
-The first sample is an update of the initial estimate ``x_a = 0`` (no prediction). A row with a
-non-finite measurement is skipped (predict only); the fixed-gain filter then keeps its gain.
+The first sample is an update of the initial estimate ``x_a = 0`` (no prediction). A missing
+sensor (NaN, or masked out by the observer bank) is left out: the update uses the sensors
+present and the virtual reading (the fixed-gain filter with the gain of those rows at the
+stationary ``P^-``); a sample with no sensor is a prediction only.
 
 Smoother (offline, beyond the seed)
 -----------------------------------
@@ -132,7 +134,7 @@ from models.wheelset import WHEELSET
 
 from . import kalman, smoothers
 from .discretize import van_loan
-from .observer import Observer
+from .observer import Observer, OfflineObserver
 
 STATES = ("y", "psi", "y_f", "dy", "dpsi", "dy_f", "xi")
 _STATE_UNITS = ("m", "rad", "m", "m/s", "rad/s", "m/s", "m")
@@ -185,7 +187,7 @@ class AlignmentKalmanFilter(Observer):
     time-varying filter only). The equations are in the module docstring.
     """
 
-    inputs: ClassVar[tuple[str, ...]] = ("ddy", "dpsi", "ddy_f")
+    measurements: ClassVar[tuple[str, ...]] = ("ddy", "dpsi", "ddy_f")
     outputs: ClassVar[tuple[str, ...]] = STATES
     units: ClassVar[dict[str, str]] = {"ddy": "m/s2", "dpsi": "rad/s", "ddy_f": "m/s2",
                                        **dict(zip(STATES, _STATE_UNITS, strict=True))}
@@ -247,6 +249,7 @@ class AlignmentKalmanFilter(Observer):
                 raise ValueError("AlignmentKalmanFilter: P0 needs 7 positive standard deviations")
             self.P0 = np.diag(np.square(std))
         self._zbuf = np.zeros(4)  # [ddy, dpsi, ddy_f, 0]: the virtual reading stays 0
+        self._row_gains: dict[tuple[int, ...], np.ndarray] = {}
         self.reset()
 
     # -- Observer hooks ------------------------------------------------------------------------
@@ -264,14 +267,31 @@ class AlignmentKalmanFilter(Observer):
         else:
             self._kf.predict()
 
-    def _update(self, z: np.ndarray) -> None:
+    def _update(self, z: np.ndarray, mask: np.ndarray) -> None:
         zb = self._zbuf
         zb[:3] = z
-        if self.steady_state:
+        if not mask.all():  # a sensor missing: the rows present and the virtual reading
+            self._update_rows(tuple(np.flatnonzero(mask)) + (3,))
+        elif self.steady_state:
             x = self._x
             self._x = x + self.K @ (zb - self.H @ x)
         else:
             self._kf.update(zb)
+
+    def _update_rows(self, rows: tuple[int, ...]) -> None:
+        """Update with the rows ``rows`` of ``H`` only (some sensors missing). The fixed-gain
+        filter uses the gain of those rows at the stationary ``P^-`` (cached per set of rows);
+        the time-varying one its own covariance."""
+        r = list(rows)
+        H, R, z = self.H[r], self.R[np.ix_(r, r)], self._zbuf[r]
+        if self.steady_state:
+            K = self._row_gains.get(rows)
+            if K is None:
+                PHt = self.P_prior @ H.T
+                K = self._row_gains[rows] = np.linalg.solve(H @ PHt + R, PHt.T).T
+            self._x = self._x + K @ (z - H @ self._x)
+        else:
+            self._kf.update(z[:, None], R=R, H=H)  # filterpy: z as a column when H is passed
 
     def _estimate(self) -> np.ndarray:
         if self.steady_state:
@@ -279,15 +299,15 @@ class AlignmentKalmanFilter(Observer):
         return self._kf.x[:, 0].copy()
 
     # -- offline smoothing --------------------------------------------------------------------
-    def smooth(self, t: np.ndarray, Z: np.ndarray) -> np.ndarray:
+    def smooth(self, t: np.ndarray, Z: np.ndarray, mask: np.ndarray | None = None) -> np.ndarray:
         r"""Offline Rauch-Tung-Striebel smoother: times ``(n,)`` and measurements
         ``(n, len(inputs))`` as for :meth:`run` -> smoothed estimates ``(n, len(outputs))`` of
         the same outputs, each conditioned on the whole record (past *and* future). Beyond
         seed 000, which filters only.
 
         Forward pass: exactly :meth:`run` (the same hook calls in the same order, so the
-        filtered estimates are bit-identical; a dropped row is predicted over, a non-finite
-        row is predicted only), on the grid of every sample time ``dt`` from ``t[0]``, so a
+        filtered estimates are bit-identical; a dropped row is predicted over, a row with
+        missing sensors (non-finite or out of ``mask``) updates with the sensors present), on the grid of every sample time ``dt`` from ``t[0]``, so a
         gap of ``m`` steps contributes ``m - 1`` prediction-only grid points. Backward pass
         (Rauch, Tung & Striebel, AIAA J. 3 (1965) 1445), from ``x^s_N = x^+_N``::
 
@@ -303,7 +323,7 @@ class AlignmentKalmanFilter(Observer):
           estimate without inverting ``P^-``, and a backward recursion that is stable
           whenever the filter is. Like the
           fixed gain it would ignore the larger covariance after a gap, records with gaps or
-          non-finite rows are smoothed by the time-varying filter's smoother from the same
+          missing sensors are smoothed by the time-varying filter's smoother from the same
           stationary start (the forward estimates stay the fixed gain's). One 7x7 product
           per step.
         * ``steady_state=False``: :func:`estimators.smoothers.rts` on the filtered means and
@@ -316,16 +336,13 @@ class AlignmentKalmanFilter(Observer):
         Afterwards the filter stands where :meth:`run` would leave it (end of the record,
         :attr:`steps` and :attr:`skipped` counted), and :attr:`last_filtered` holds the
         forward estimates at the sample times (equal to what :meth:`run` returns)."""
-        t = np.asarray(t, dtype=float)
-        Z = np.asarray(Z, dtype=float)
-        if t.ndim != 1 or Z.shape != (t.shape[0], self._n_in):
-            raise ValueError(f"{type(self).__name__}.smooth: t {t.shape} and Z {Z.shape} do not match "
-                             f"(expected (n,) and (n, {self._n_in}))")
+        t, Z, _, present = self._record(t, Z, None, mask, "smooth")
         n = t.shape[0]
         if n == 0:
             return np.empty((0, len(self.outputs)))
         gaps = [0] + [self._n_steps(float(t[k - 1]), float(t[k])) for k in range(1, n)]
-        ok = np.isfinite(Z).all(axis=1)
+        ok = present.all(axis=1)
+        some = present.any(axis=1)
         self.reset(float(t[0]))
         n_grid = 1 + sum(gaps)
         rows = np.cumsum(gaps)  # grid index of each sample
@@ -349,6 +366,10 @@ class AlignmentKalmanFilter(Observer):
                     nu = zb - H @ x
                     x = x + K @ nu
                     NU[g] = nu
+                elif some[k]:  # some sensors missing: smoothed below by the time-varying twin
+                    self._x = x
+                    self._update(Z[k], present[k])
+                    x = self._x
                 X[g] = x
                 g += 1
             self._x = x
@@ -360,11 +381,12 @@ class AlignmentKalmanFilter(Observer):
                     if i < gaps[k] - 1:
                         X[g], P[g] = kf.x[:, 0], kf.P
                         g += 1
-                if ok[k]:
-                    self._update(Z[k])
+                if some[k]:
+                    self._update(Z[k], present[k])
                 X[g], P[g] = kf.x[:, 0], kf.P
                 g += 1
-        self.steps, self.skipped, self._t = n, int(n - ok.sum()), float(t[-1])
+        self.steps, self.skipped, self._t = n, int(n - some.sum()), float(t[-1])
+        self.partial = int(some.sum() - ok.sum())
         #: the forward (filtered) estimates of the last smooth(), at the sample times
         self.last_filtered = X[rows]
 
@@ -376,7 +398,7 @@ class AlignmentKalmanFilter(Observer):
             # backward correction (measured: rms 7 x rms(xi) for a 50 ms gap). The smoother of
             # the time-varying filter from the same stationary start instead (rms 0.4 %).
             twin = type(self)(self.dt, **{**self.settings, "steady_state": False})
-            return twin.smooth(t, Z)
+            return twin.smooth(t, Z, present)
         else:
             Xs = smoothers.rts(X, P, self.F, self.Q)[0]
         return Xs[rows]
@@ -398,3 +420,27 @@ class AlignmentKalmanFilter(Observer):
         return {**super().finish(), "steady_state": self.steady_state, "q_xi": self.q_xi,
                 "sigma_virtual": self.sigma_virtual, "sigma_xi": float(math.sqrt(P[6, 6])),
                 "observability_rank": self.observability_rank()}
+
+
+class AlignmentRTSSmoother(OfflineObserver):
+    """The offline RTS smoother of :class:`AlignmentKalmanFilter` as an observer of the run:
+    given the whole record, the estimates conditioned on past and future
+    (:meth:`AlignmentKalmanFilter.smooth`). Measurements, outputs, units and settings are the
+    filter's (a smoother on its own design model takes that model's settings)."""
+
+    measurements: ClassVar[tuple[str, ...]] = AlignmentKalmanFilter.measurements
+    outputs: ClassVar[tuple[str, ...]] = AlignmentKalmanFilter.outputs
+    units: ClassVar[dict[str, str]] = AlignmentKalmanFilter.units
+
+    def __init__(self, dt: float, **settings: Any) -> None:
+        super().__init__(dt, **settings)
+        self.filter = AlignmentKalmanFilter(dt, **settings)
+
+    def _run(self, t: np.ndarray, Z: np.ndarray, U: np.ndarray, mask: np.ndarray) -> np.ndarray:
+        return self.filter.smooth(t, Z, mask)
+
+    def observability_rank(self) -> int:
+        return self.filter.observability_rank()
+
+    def finish(self) -> dict:
+        return self.filter.finish()

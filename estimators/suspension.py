@@ -36,8 +36,10 @@ rate, so one matrix exponential of (:func:`estimators.discretize.foh`) ::
     [[A(k1), Bz, Bd], [0, 0, I], [0, 0, 0]] dt
 
 gives ``x_{k+1} = F x_k + G [w_k, dw_k]`` exactly (checked against the FMU: 2e-11 relative).
-A row that is skipped (non-finite) is bridged by extrapolating the last rails with their
-rates. The observers are designed for ``dt`` = the data's sample time (10 ms in seed 004 §3).
+The rails are known inputs ``u`` (taken at each sample, held by the FMU's hold in between);
+a sample whose rails are missing is bridged by extrapolating the last rails with their rates.
+A missing sensor (NaN, or masked out) is left out of the update: both observers update with
+the rows present. The observers are designed for ``dt`` = the data's sample time (10 ms in seed 004 §3).
 
 Sensor noise levels
 -------------------
@@ -153,9 +155,11 @@ def _sigmas(settings: dict[str, Any]) -> np.ndarray:
 
 
 class _CoachObserver(Observer):
-    """Bookkeeping shared by both: inputs (7 sensors + rails + rates), the held rail input."""
+    """Bookkeeping shared by both: measurements (the 7 sensors), known inputs (rails + rates,
+    held as ``self._u``)."""
 
-    inputs: ClassVar[tuple[str, ...]] = (*SENSORS, *RAILS, *RAIL_RATES)
+    measurements: ClassVar[tuple[str, ...]] = SENSORS
+    inputs: ClassVar[tuple[str, ...]] = (*RAILS, *RAIL_RATES)
     _OWN: ClassVar[dict[str, Any]] = {}
 
     def __init__(self, dt: float, **settings: Any) -> None:
@@ -173,7 +177,7 @@ class _CoachObserver(Observer):
 
     def _hold_rails(self) -> None:
         """After a prediction: extrapolate the rails with their rates (the FMU's hold) for
-        the case that the next row is skipped."""
+        the case that the next sample's rails are missing."""
         self._u[:4] += self._u[4:] * self.dt
 
 
@@ -224,10 +228,10 @@ class SuspensionWLS(_CoachObserver):
     ``theta = k1`` (eqs. 7-9) and the weighted-least-squares update ``theta_k = theta_{k-1} +
     beta J(theta)`` from the filter's residuals (eqs. 10-11).
 
-    Inputs: the 7 sensors of :data:`models.coach_vertical.SENSORS` (ddz_c m/s2, dtheta_c,
-    dphi_c rad/s, ddz_b1 m/s2, dphi_b1 rad/s, ddz_b2 m/s2, dphi_b2 rad/s), the rail heights
-    ``z_l1, z_r1, z_l2, z_r2`` (m) and their rates ``dz_*`` (m/s): the seed's known track
-    input ``u``, ``u'``. Outputs: ``k1`` (N/m) and the 14 states (m, rad, m/s, rad/s).
+    Measurements: the 7 sensors of :data:`models.coach_vertical.SENSORS` (ddz_c m/s2,
+    dtheta_c, dphi_c rad/s, ddz_b1 m/s2, dphi_b1 rad/s, ddz_b2 m/s2, dphi_b2 rad/s). Known
+    inputs: the rail heights ``z_l1, z_r1, z_l2, z_r2`` (m) and their rates ``dz_*`` (m/s), the
+    seed's known track input ``u``, ``u'``. Outputs: ``k1`` (N/m) and the 14 states (m, rad, m/s, rad/s).
 
     Kalman filter (eqs. 7-9), with ``F(theta), G(theta)`` the exact discretisation of the
     design model (module docstring) at the current estimate::
@@ -340,24 +344,28 @@ class SuspensionWLS(_CoachObserver):
             self._w = F @ self._w + g
         self._hold_rails()
 
-    def _update(self, z: np.ndarray) -> None:
+    def _update(self, z: np.ndarray, mask: np.ndarray) -> None:
         kf, m = self._kf, self.model
-        self._u = z[7:].copy()
         H = m.H(self.theta * self.k1_initial)
         x_prior = kf.x[:, 0].copy()
-        kf.update((z[:7] - m.Du @ self._u)[:, None], H=H)  # filterpy: Joseph form; z as a column
-        # (filterpy reshapes z only when H is not passed)
+        rows = slice(None) if mask.all() else np.flatnonzero(mask)  # the sensors present
+        # filterpy: Joseph form; z as a column (filterpy reshapes z only when H is not passed)
+        if mask.all():
+            kf.update((z - m.Du @ self._u)[:, None], H=H)
+        else:
+            kf.update((z[rows] - m.Du[rows] @ self._u)[:, None], R=self.R[np.ix_(rows, rows)], H=H[rows])
         r = kf.y[:, 0]
-        rn = r / self.sigma
+        sigma, gamma = self.sigma[rows], self.gamma[rows]
+        rn = r / sigma
         if self.gradient:
             dHx = self.k1_initial * (m.H1 @ x_prior)
-            sens = H @ self._w + dHx
-            sn = sens / self.sigma
-            self._acc += float(self.gamma @ (rn * sn))
-            self._info += float(self.gamma @ (sn * sn))
+            sens = (H @ self._w + dHx)[rows]
+            sn = sens / sigma
+            self._acc += float(gamma @ (rn * sn))
+            self._info += float(gamma @ (sn * sn))
             self._w = self._w - kf.K @ sens
         else:
-            self._acc += float(self.gamma @ rn)
+            self._acc += float(gamma @ rn)
         self._n += 1
         if self._n == self.window:
             if self.gradient:  # Gauss-Newton: the window's weighted least-squares increment
@@ -383,7 +391,8 @@ class SuspensionJoint(_CoachObserver):
     r"""Joint state and stiffness estimation: an extended Kalman filter on the 7-DOF model
     augmented with ``theta = k1 / k1_initial`` as a random walk.
 
-    Inputs: as :class:`SuspensionWLS` (7 sensors, rails ``z_*`` m, rates ``dz_*`` m/s).
+    Measurements and known inputs: as :class:`SuspensionWLS` (7 sensors; rails ``z_*`` m,
+    rates ``dz_*`` m/s).
     Outputs: ``k1`` (N/m), ``k1_std`` (N/m, the filter's 1-sigma) and the 14 states.
 
     Augmented design model (``x_a = [x, theta]``, 15 states)::
@@ -467,15 +476,14 @@ class SuspensionJoint(_CoachObserver):
         self._P = kalman.predict_covariance(self._P, Fa, self.Q)
         self._hold_rails()
 
-    def _update(self, z: np.ndarray) -> None:
+    def _update(self, z: np.ndarray, mask: np.ndarray) -> None:
         x, m = self._x, self.model
         ks = self.k1_initial
-        self._u = z[7:].copy()
         H = m.H(x[14] * ks)
         Ha = np.empty((7, 15))
         Ha[:, :14] = H
         Ha[:, 14] = ks * (m.H1 @ x[:14])
-        up = kalman.update(x, self._P, z[:7], Ha, self.R, z_pred=H @ x[:14] + m.Du @ self._u)
+        up = kalman.update(x, self._P, z, Ha, self.R, z_pred=H @ x[:14] + m.Du @ self._u, mask=mask)
         self._x, self._P = up.x, up.P
         self._x[14] = max(self._x[14], self.theta_min)
 

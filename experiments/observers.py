@@ -1,82 +1,226 @@
 """Observers attached to a run: a recorder sink that feeds each estimator its bound signals.
 
 The SSD declares each observer (``org.railfmu.observers`` annotation, read into
-:class:`fmus.cosim.system.ObserverSpec`). :class:`ObserverBank` instantiates them and, as a sink
-of the master, hands every recorded row to each observer's ``step`` — one communication
-step at a time inside the Python masters, row by row from blocks on the container path
-(observers are passive, so both see the same samples). ``estimates.csv`` is written as the
-run goes, like ``signals.csv``.
+:class:`fmus.cosim.system.ObserverSpec`). :class:`ObserverBank` instantiates them and, as a
+sink of the master, feeds them the recorded rows — one communication step at a time inside
+the Python masters, row by row from blocks on the container path (observers are passive, so
+both see the same samples):
+
+* **units**: every measurement and known input arrives in the unit the observer declares,
+  converted from the unit of the signal it is bound to (``dst = a src + b``); incompatible
+  units, or a unit on one side only, are a :class:`fmus.errors.UserError`;
+* **multi-rate**: an observer with a ``samplePeriod`` of ``m`` system steps gets every
+  ``m``-th row, whatever the system step (10 s GNSS in a 0.1 s system);
+* **missing channels**: a measurement is missing where it is NaN, where its ``valid`` flag
+  is 0, or, for an event-driven observer, where it has not changed since the last sample;
+  the observer updates with the channels present (its ``mask``);
+* **offline observers** (``offline="true"``: smoothers, batch identification) get the whole
+  record once the run has ended and write ``estimates_<name>.csv``.
+
+``estimates.csv`` (the online estimates, each held between its observer's samples) is
+written as the run goes, like ``signals.csv``.
 """
 
 from __future__ import annotations
 
 import importlib
 import math
+import time
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from fmus.errors import UserError
 from fmus.cosim.recorder import CsvRecorder
 from fmus.cosim.system import ObserverSpec, System
+from fmus.errors import UserError
+from fmus.ssp.units import OURS, Units, conversion
+
+_STRIDE_RTOL = 1e-9
 
 
-def make_observer(spec: ObserverSpec, dt: float, where: str):
-    """Import ``spec.cls`` and instantiate it with the spec's settings (a UserError if not possible)."""
+def make_observer(spec: ObserverSpec, step_size: float, where: str):
+    """Import ``spec.cls`` and instantiate it at its sample period with the spec's settings;
+    returns ``(estimator, stride)`` (its period in system steps). A UserError if not possible."""
+    label = f"{where}: Observer {spec.name!r}"
+    period = spec.period if spec.period is not None else step_size
+    stride = round(period / step_size)
+    if stride < 1 or abs(stride * step_size - period) > _STRIDE_RTOL * period:
+        raise UserError(f"{label}: samplePeriod {period:g} s is not a whole number of system steps "
+                        f"({step_size:g} s)")
     module_name, _, class_name = spec.cls.rpartition(".")
     try:
         cls = getattr(importlib.import_module(module_name), class_name)
     except (ImportError, AttributeError, ValueError):
-        raise UserError(f"{where}: Observer {spec.name!r}: cannot import class {spec.cls!r}") from None
+        raise UserError(f"{label}: cannot import class {spec.cls!r}") from None
+    offline = bool(getattr(cls, "offline", False))
+    if offline != spec.offline:
+        raise UserError(f"{label}: {spec.cls} is an {'offline' if offline else 'online'} estimator; "
+                        f"declare it with offline=\"{str(offline).lower()}\"")
     try:
-        obs = cls(dt, **spec.settings)
+        obs = cls(period, **spec.settings)
     except (TypeError, ValueError) as exc:
-        raise UserError(f"{where}: Observer {spec.name!r}: bad settings: {exc}") from None
-    missing = [k for k in obs.inputs if k not in spec.inputs]
-    unknown = [k for k in spec.inputs if k not in obs.inputs]
-    if missing or unknown:
-        raise UserError(f"{where}: Observer {spec.name!r}: inputs must be {', '.join(obs.inputs)}"
-                        f" ({'missing ' + ', '.join(missing) if missing else 'unknown ' + ', '.join(unknown)})")
+        raise UserError(f"{label}: bad settings: {exc}") from None
+    for kind, declared, bound in (("measurements", obs.measurements, spec.measurements),
+                                  ("inputs", obs.inputs, spec.inputs)):
+        missing = [k for k in declared if k not in bound]
+        unknown = [k for k in bound if k not in declared]
+        if missing or unknown:
+            raise UserError(f"{label}: {kind} must be {', '.join(declared) or '(none)'}"
+                            f" ({'missing ' + ', '.join(missing) if missing else 'unknown ' + ', '.join(unknown)})")
+    bad_valid = [k for k in spec.valid if k not in obs.measurements]
+    if bad_valid:
+        raise UserError(f"{label}: valid flag for {bad_valid[0]!r}, which is not one of its measurements")
     bad_truth = [k for k in spec.truth if k not in obs.outputs]
     if bad_truth:
-        raise UserError(f"{where}: Observer {spec.name!r}: Truth {bad_truth[0]!r} is not one of its "
-                        f"outputs ({', '.join(obs.outputs)})")
-    return obs
+        raise UserError(f"{label}: Truth {bad_truth[0]!r} is not one of its outputs ({', '.join(obs.outputs)})")
+    return obs, stride
+
+
+def unit_map(spec: ObserverSpec, obs, kind: str, name: str, signal: str, where: str) -> tuple[float, float]:
+    """``(a, b)``: the value in the observer's unit of ``name`` is ``a * signal + b``. A
+    UserError naming observer, channel and both units when they cannot be converted."""
+    want = obs.units.get(name, "")
+    src = spec.units.get(signal)
+    have = src.name if src is not None else ""
+    label = f"{where}: Observer {spec.name!r}: {kind} {name!r}"
+    if want and OURS.get(want) is None:
+        raise UserError(f"{label}: unit {want!r} of the observer is not defined in fmus/units.py")
+    if not want and not have:
+        return 1.0, 0.0
+    if not have:
+        raise UserError(f"{label} is in {want!r} but {signal} has no unit (give the SSD connector "
+                        f"<ssc:Real unit=\"{want}\"/>)")
+    if not want:
+        if any(src.exponents):
+            raise UserError(f"{label} is dimensionless but {signal} is in {have!r}")
+        want = have
+    try:
+        return conversion(have, Units({have: src}).then(OURS), want, OURS)
+    except ValueError:
+        raise UserError(f"{label} is in {want!r} ({OURS.get(want).dims()}) but {signal} is in {have!r} "
+                        f"({src.dims()}): incompatible units") from None
+
+
+def _affine(maps: list[tuple[float, float]]):
+    """The per-channel maps as arrays, or None when every one is the identity (no arithmetic,
+    so the samples reach the observer bit for bit)."""
+    if all(m == (1.0, 0.0) for m in maps):
+        return None
+    return np.array([a for a, _ in maps]), np.array([b for _, b in maps])
+
+
+@dataclass
+class _Feed:
+    """How one observer is fed: its spec, the estimator, its stride in rows and unit maps."""
+    spec: ObserverSpec
+    obs: object
+    stride: int
+    z_map: tuple | None = None
+    u_map: tuple | None = None
+    truth_map: dict[str, tuple[float, float]] = field(default_factory=dict)
+    event: bool = False
+    # set by open(): column indices into the recorded rows
+    iz: list[int] = field(default_factory=list)
+    iu: list[int] = field(default_factory=list)
+    flagged: list[int] = field(default_factory=list)  # measurement positions with a valid flag
+    iflag: list[int] = field(default_factory=list)
+    last_z: np.ndarray | None = None
+    estimate: np.ndarray | None = None
+    seconds: float = 0.0
+
+    def sample(self, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:
+        """``(Z, U, mask)`` of recorded rows (2-D) in the observer's units; mask None: as finite."""
+        Z = rows[:, self.iz]
+        if self.z_map is not None:
+            Z = self.z_map[0] * Z + self.z_map[1]
+        U = rows[:, self.iu] if self.iu else None
+        if U is not None and self.u_map is not None:
+            U = self.u_map[0] * U + self.u_map[1]
+        mask = None
+        if self.flagged or self.event:
+            mask = np.ones(Z.shape, dtype=bool)
+            if self.event:  # a channel without a flag is there when its value has changed
+                prev = np.vstack([self.last_z if self.last_z is not None else np.full(Z.shape[1], np.nan), Z[:-1]])
+                mask = ~(Z == prev)
+                self.last_z = Z[-1].copy()
+            mask[:, self.flagged] = rows[:, self.iflag] != 0.0
+        return Z, U, mask
 
 
 class ObserverBank:
-    """A :class:`fmus.cosim.system.Sink` running every observer of a system and writing estimates.csv."""
+    """A :class:`fmus.cosim.system.Sink` running every observer of a system: the online ones
+    as the rows arrive (``estimates.csv``), the offline ones after a complete run
+    (``estimates_<name>.csv`` beside it)."""
 
     def __init__(self, system: System, out_csv: Path | None):
         where = str(system.source or system.name)
-        self.specs = system.observers
-        self.observers = [make_observer(s, system.step_size, where) for s in self.specs]
+        self.step_size = system.step_size
+        self.online: list[_Feed] = []
+        self.offline: list[_Feed] = []
+        for spec in system.observers:
+            obs, stride = make_observer(spec, system.step_size, where)
+            feed = _Feed(spec, obs, stride, event=spec.event if spec.event is not None else obs.event_driven)
+            feed.z_map = _affine([unit_map(spec, obs, "measurement", k, spec.measurements[k], where)
+                                  for k in obs.measurements])
+            feed.u_map = _affine([unit_map(spec, obs, "input", k, spec.inputs[k], where) for k in obs.inputs])
+            feed.truth_map = {k: unit_map(spec, obs, "truth", k, s, where) for k, s in spec.truth.items()}
+            (self.offline if spec.offline else self.online).append(feed)
+        self.out_csv = out_csv
         self.recorder = CsvRecorder(out_csv) if out_csv is not None else None
         self.times: list[float] = []
-        self.estimates: list[np.ndarray] = []  # one (n_outputs_total,) row per sample
+        self.estimates: list[np.ndarray] = []  # one (n_outputs_total,) row per recorded row
+        self.results: dict[str, tuple[np.ndarray, np.ndarray]] = {}  # offline: name -> (t, X)
+
+    # the online observers, for plots and tables
+    @property
+    def specs(self) -> list[ObserverSpec]:
+        return [f.spec for f in self.online]
+
+    @property
+    def observers(self) -> list:
+        return [f.obs for f in self.online]
 
     @property
     def columns(self) -> list[str]:
-        return [f"{s.name}.{o}" for s, obs in zip(self.specs, self.observers) for o in obs.outputs]
+        return [f"{f.spec.name}.{o}" for f in self.online for o in f.obs.outputs]
 
     def open(self, columns: list[str]) -> None:
-        self._index = []
-        for spec, obs in zip(self.specs, self.observers):
+        def index(feed: _Feed, signal: str) -> int:
             try:
-                self._index.append([columns.index(spec.inputs[k]) for k in obs.inputs])
+                return columns.index(signal)
             except ValueError:
-                raise UserError(f"Observer {spec.name!r}: an input signal is not recorded") from None
-        for obs in self.observers:
-            obs.reset(0.0)
+                raise UserError(f"Observer {feed.spec.name!r}: signal {signal} is not recorded") from None
+
+        for f in (*self.online, *self.offline):
+            s = f.spec
+            f.iz = [index(f, s.measurements[k]) for k in f.obs.measurements]
+            f.iu = [index(f, s.inputs[k]) for k in f.obs.inputs]
+            f.flagged = [j for j, k in enumerate(f.obs.measurements) if k in s.valid]
+            f.iflag = [index(f, s.valid[f.obs.measurements[j]]) for j in f.flagged]
+            f.last_z, f.estimate = None, None
+        for f in self.online:
+            f.obs.reset(0.0)
+        # the offline observers' columns, kept for after the run
+        self._kept = sorted({0, *(i for f in self.offline for i in (*f.iz, *f.iu, *f.iflag))})
+        self._record: list[np.ndarray] = []
+        self._row = 0
+        self.times, self.estimates, self.results = [], [], {}
         if self.recorder is not None:  # the same writer as signals.csv: complete rows, as it goes
             self.recorder.open(["time", *self.columns])
 
     def write(self, row: np.ndarray) -> None:
-        t = float(row[0])
-        est = np.concatenate([obs.step(t, row[idx]) for obs, idx in zip(self.observers, self._index)]) \
-            if self.observers else np.empty(0)
+        t, k = float(row[0]), self._row
+        self._row += 1
+        for f in self.online:
+            if k % f.stride == 0:
+                Z, U, mask = f.sample(row[None, :])
+                f.estimate = f.obs.step(t, Z[0], None if U is None else U[0], None if mask is None else mask[0])
+        est = np.concatenate([f.estimate for f in self.online]) if self.online else np.empty(0)
         self.times.append(t)
         self.estimates.append(est)
+        if self.offline:
+            self._record.append(row[self._kept])
         if self.recorder is not None:
             self.recorder.write(np.concatenate(([t], est)))
 
@@ -87,29 +231,77 @@ class ObserverBank:
     def close(self, complete: bool) -> None:
         if self.recorder is not None:
             self.recorder.close(complete)
+        if complete and self.offline and self._record:
+            self._run_offline()
+
+    def _run_offline(self) -> None:
+        """Each offline observer on the whole record (its own sample rows), to estimates_<name>.csv."""
+        kept = np.vstack(self._record)
+        at = {c: j for j, c in enumerate(self._kept)}
+        for f in self.offline:
+            rows = kept[::f.stride]
+            local = _Feed(f.spec, f.obs, f.stride, f.z_map, f.u_map, event=f.event,
+                          iz=[at[i] for i in f.iz], iu=[at[i] for i in f.iu], flagged=f.flagged,
+                          iflag=[at[i] for i in f.iflag])
+            Z, U, mask = local.sample(rows)
+            t0 = time.perf_counter()
+            X = f.obs.run(rows[:, 0], Z, U, mask)
+            f.seconds = time.perf_counter() - t0
+            self.results[f.spec.name] = (rows[:, 0], X)
+            if self.out_csv is not None:
+                rec = CsvRecorder(self.out_csv.parent / f"estimates_{f.spec.name}.csv")
+                rec.open(["time", *(f"{f.spec.name}.{o}" for o in f.obs.outputs)])
+                rec.write_block(np.column_stack([rows[:, 0], X]))
+                rec.close(True)
 
     def arrays(self) -> tuple[np.ndarray, np.ndarray]:
+        """The online estimates: times and one row of every online observer's outputs."""
         t = np.asarray(self.times)
         return t, (np.vstack(self.estimates) if self.estimates else np.empty((0, len(self.columns))))
 
+    def offline_estimates(self) -> dict[str, np.ndarray]:
+        """The offline estimates by column ``name.output`` (on their observer's sample times)."""
+        return {f"{name}.{o}": X[:, j] for name, (_, X) in self.results.items()
+                for j, o in enumerate(next(f.obs for f in self.offline if f.spec.name == name).outputs)}
+
     def metrics(self, signals: dict[str, np.ndarray], settle_fraction: float = 0.1) -> dict:
-        """Per observer: its diagnostics and, for every estimate with a truth signal, the rms
-        error against it after the first ``settle_fraction`` of the run (the filter's transient)."""
+        """Per observer (online and offline): its diagnostics and, for every estimate with a
+        truth signal, the rms error against it at its own samples after the first
+        ``settle_fraction`` of the run (the filter's transient)."""
         t, est = self.arrays()
         out: dict[str, dict] = {}
-        col = 0
         n0 = math.ceil(settle_fraction * len(t))
-        for spec, obs in zip(self.specs, self.observers):
-            m: dict = dict(obs.finish())
-            for j, name in enumerate(obs.outputs):
-                if name in spec.truth and len(t) > n0:
-                    truth = np.asarray(signals[spec.truth[name]])[n0:len(t)]
-                    err = est[n0:, col + j] - truth
-                    rms_truth = float(np.sqrt(np.mean(truth ** 2)))
-                    rms_err = float(np.sqrt(np.mean(err ** 2)))
-                    m[name] = {"rms_error": rms_err, "rms_truth": rms_truth,
-                               "rel_error": rms_err / rms_truth if rms_truth > 0 else None,
-                               "from_time_s": float(t[n0])}
-            out[spec.name] = m
-            col += len(obs.outputs)
+        col = 0
+        for f in self.online:
+            out[f.spec.name] = self._scores(f, t, est[:, col:col + len(f.obs.outputs)], n0, signals)
+            col += len(f.obs.outputs)
+        for f in self.offline:
+            if f.spec.name in self.results:
+                _, X = self.results[f.spec.name]
+                full = np.full((len(t), X.shape[1]), np.nan)
+                full[::f.stride] = X
+                m = self._scores(f, t, full, n0, signals)
+                out[f.spec.name] = {"offline": True, "wall_time_s": f.seconds, **m}
         return out
+
+    @staticmethod
+    def _scores(f: _Feed, t: np.ndarray, est: np.ndarray, n0: int, signals: dict) -> dict:
+        m: dict = dict(f.obs.finish())
+        rows = np.arange(0, len(t), f.stride)
+        rows = rows[rows >= n0]
+        if len(t) <= n0:
+            return m
+        for j, name in enumerate(f.obs.outputs):
+            if name in f.spec.truth:
+                truth = np.asarray(signals[f.spec.truth[name]])[:len(t)]
+                a, b = f.truth_map[name]
+                if (a, b) != (1.0, 0.0):
+                    truth = a * truth + b
+                truth = truth[rows]
+                err = est[rows, j] - truth
+                rms_truth = float(np.sqrt(np.mean(truth ** 2)))
+                rms_err = float(np.sqrt(np.mean(err ** 2)))
+                m[name] = {"rms_error": rms_err, "rms_truth": rms_truth,
+                           "rel_error": rms_err / rms_truth if rms_truth > 0 else None,
+                           "from_time_s": float(t[n0])}
+        return m

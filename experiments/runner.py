@@ -2,10 +2,10 @@
 
 An experiment is a folder under ``experiments/`` with ``SystemStructure.ssd`` and
 ``variants/*.ssv``; its ``__init__.py`` may add plots (``PLOTS``), a default variant
-(``DEFAULT_VARIANT``), study metrics (``metrics(signals, estimates, base) -> dict``; it may add
-offline estimates, e.g. a smoother's, to ``estimates`` for the figures), its own
-figures (``plots(signals, estimates, out, metrics) -> [files]``), a report section
-(``report_md(metrics) -> str``) and a study table (``table_md(table) -> str``).
+(``DEFAULT_VARIANT``), study metrics (``metrics(signals, estimates, base) -> dict``;
+``estimates`` holds the online observers' columns and the offline observers', e.g. a
+smoother's ``smoother.xi``), its own figures (``plots(signals, estimates, out, metrics) ->
+[files]``), a report section (``report_md(metrics) -> str``) and a study table (``table_md(table) -> str``).
 ``railfmu run`` also accepts any SSP (a ``.ssp`` archive, an ``.ssd`` file or a folder):
 then every recorded signal is plotted.
 """
@@ -128,7 +128,7 @@ def run_experiment(name: str, variant: str | None = None, out: Path | str | None
 
     signals = {c: result.data[:, j] for j, c in enumerate(result.columns)}
     t_est, est = bank.arrays()
-    estimates = {"time": t_est, **{c: est[:, j] for j, c in enumerate(bank.columns)}}
+    estimates = {"time": t_est, **{c: est[:, j] for j, c in enumerate(bank.columns)}, **bank.offline_estimates()}
     metrics = {
         "experiment": exp.name, "variant": variant, "master": master,
         "start_time_s": system.start_time, "stop_time_s": system.stop_time, "step_size_s": system.step_size,
@@ -179,13 +179,16 @@ def _report(exp: Experiment, system, metrics: dict, plots: list[str], out: Path)
     if exp.module is not None and hasattr(exp.module, "report_md"):
         L += ["", exp.module.report_md(metrics)]
     for name, m in metrics["observers"].items():
-        L += ["", f"## Observer `{name}`", "", "| estimate | rms error | rms truth | relative |", "|---|---|---|---|"]
+        heading = (f"## Offline observer `{name}` (run on the whole record after the run, "
+                   f"{m['wall_time_s']:.3f} s)" if m.get("offline") else f"## Observer `{name}`")
+        L += ["", heading, "", "| estimate | rms error | rms truth | relative |", "|---|---|---|---|"]
         for est, v in m.items():
             if isinstance(v, dict) and "rms_error" in v:
                 rel = f"{v['rel_error']:.3f}" if v["rel_error"] is not None else "-"
                 L.append(f"| {est} | {v['rms_error']:.4g} | {v['rms_truth']:.4g} | {rel} |")
         L.append(f"\nErrors after t = {next((v['from_time_s'] for v in m.values() if isinstance(v, dict)), 0):g} s "
-                 "(the first 10 % of the run is the filter's transient).")
+                 + ("(the first 10 % of the run left out, as for the online filters). Written to "
+                    f"estimates_{name}.csv." if m.get("offline") else "(the first 10 % of the run is the filter's transient)."))
     L += ["", "## Signals (rms)", "", "| signal | rms |", "|---|---|"]
     L += [f"| {k} | {v:.4g} |" for k, v in metrics["rms"].items()]
     if metrics["warnings"] or metrics["notes"]:

@@ -44,10 +44,11 @@ def test_reduced_standard_run(tmp_path):
         assert m["J_rel"][band] <= 1.5 * bound, band
         assert m["J_rel_smoothed"][band] < m["J_rel"][band], band
     assert m["J_rel"]["whole"] <= 0.2  # the 400 m study: 0.12
-    for f in ("alignment.png", "alignment_bands.png", "sensors.png", "estimates_smoothed.csv", "report.md"):
+    for f in ("alignment.png", "alignment_bands.png", "sensors.png", "estimates_smoother.csv", "report.md"):
         assert (out / f).is_file(), f
     report = (out / "report.md").read_text()
     assert "Identification" in report and "seed 000" in report
+    assert "## Offline observer `smoother`" in report and "## Observer `smoother`" not in report
 
 
 def test_resonance_wavelength_is_v_over_f1_of_the_complete_model():

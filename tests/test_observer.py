@@ -1,5 +1,5 @@
 """The observer interface (estimators/observer.py) on data from the real FMUs: online step by
-step equals offline, CSV equals arrays, non-finite measurements are skipped and counted."""
+step equals offline, CSV equals arrays, missing channels are left out and counted."""
 
 import numpy as np
 import pytest
@@ -42,8 +42,27 @@ def test_run_csv_equals_run(recorded):
         kf.run_csv(csv_path)  # the CSV names are wheelset.ddy, ...: no column 'ddy'
 
 
+def test_run_csv_empty_cell_is_a_missing_channel(recorded, tmp_path):
+    """A measured record replayed from CSV: an empty cell is a missing channel, as NaN."""
+    t, Z, _, csv_path = recorded
+    lines = csv_path.read_text().splitlines()
+    col = lines[0].split(",").index("wheelset.dpsi")
+    cells = lines[51].split(",")
+    cells[col] = ""
+    lines[51] = ",".join(cells)  # row 50 of the data
+    gappy = tmp_path / "gappy.csv"
+    gappy.write_text("\n".join(lines) + "\n")
+    kf = AlignmentKalmanFilter(DT)
+    _, X = kf.run_csv(gappy, columns=COLUMNS)
+    Z_nan = Z.copy()
+    Z_nan[50, 1] = np.nan
+    assert np.array_equal(X, AlignmentKalmanFilter(DT).run(t, Z_nan)) and kf.partial == 1
+
+
 @pytest.mark.parametrize("steady_state", [True, False])
-def test_nonfinite_measurements_are_skipped(recorded, steady_state):
+def test_missing_channels_are_left_out(recorded, steady_state):
+    """One sensor missing: updated with the others; all missing: a prediction only, the same
+    as a row that never arrived; a mask equals NaN in the masked places."""
     t, Z, _, _ = recorded
     clean = AlignmentKalmanFilter(DT, steady_state=steady_state).run(t, Z)
     bad = Z.copy()
@@ -52,14 +71,31 @@ def test_nonfinite_measurements_are_skipped(recorded, steady_state):
     bad[300:310, :] = np.nan
     kf = AlignmentKalmanFilter(DT, steady_state=steady_state)
     X = kf.run(t, bad)
-    assert kf.skipped == 12 and kf.finish()["skipped"] == 12 and kf.finish()["steps"] == len(t)
+    assert (kf.skipped, kf.partial) == (10, 2) and kf.finish()["skipped"] == 10 and kf.finish()["steps"] == len(t)
     assert np.all(np.isfinite(X))
     assert np.array_equal(X[:100], clean[:100])  # nothing leaks backwards
-    assert not np.array_equal(X[100], clean[100])  # the bad row was not used
-    if steady_state:
-        # a skipped row is a prediction only: the same as a row that never arrived
-        X_gap = AlignmentKalmanFilter(DT).run(np.delete(t, 100), np.delete(Z, 100, axis=0))
-        assert np.array_equal(X_gap[100:199], X[101:200])
+    assert not np.array_equal(X[100], clean[100])  # the bad channel was not used ...
+    X_pred = AlignmentKalmanFilter(DT, steady_state=steady_state).run(t[:101], np.vstack([Z[:100], np.nan * Z[0]]))
+    assert not np.array_equal(X[100], X_pred[100])  # ... the other two were
+    mask = np.isfinite(bad)
+    assert np.array_equal(AlignmentKalmanFilter(DT, steady_state=steady_state).run(t, Z, mask=mask), X)
+    # a sample with no sensor is a prediction only: the same as a sample that never arrived
+    gap = np.r_[0:300, 310:len(t)]
+    X_gap = AlignmentKalmanFilter(DT, steady_state=steady_state).run(t[gap], bad[gap])
+    assert np.array_equal(X_gap[300:], X[310:])
+
+
+def test_masked_channel_is_a_channel_of_infinite_noise(recorded):
+    """The time-varying filter with the gyro masked out at every sample equals (to 1e-9) the
+    filter whose gyro has a standard deviation of 1e9 rad/s, from the same initial covariance."""
+    t, Z, xi, _ = recorded
+    std = np.array([1e-3, 1e-4, 1e-3, 1e-2, 1e-2, 1e-2, 1e-3])
+    masked = AlignmentKalmanFilter(DT, steady_state=False, P0=std).run(
+        t, Z, mask=np.tile([True, False, True], (len(t), 1)))
+    deaf = AlignmentKalmanFilter(DT, steady_state=False, P0=std, sigma_gyro=1e9).run(t, Z)
+    assert np.abs(masked[:, 6] - deaf[:, 6]).max() < 1e-9 * np.sqrt(np.mean(xi ** 2))
+    full = AlignmentKalmanFilter(DT, steady_state=False, P0=std).run(t, Z)
+    assert np.abs(masked[:, 6] - full[:, 6]).max() > 1e-3 * np.sqrt(np.mean(xi ** 2))  # the gyro matters
 
 
 def test_time_and_shape_checks(recorded):
@@ -79,4 +115,4 @@ def test_time_and_shape_checks(recorded):
         AlignmentKalmanFilter(0.0)
     assert AlignmentKalmanFilter(DT, steady_state="false").steady_state is False  # SSD text
     assert kf.units["ddy"] == "m/s2" and kf.units["xi"] == "m"
-    assert set(kf.units) == {*kf.inputs, *kf.outputs}
+    assert set(kf.units) == {*kf.measurements, *kf.outputs} and kf.inputs == ()

@@ -123,7 +123,7 @@ def test_example_experiment(fmu_dir):
     assert len(s.record) == 11
     (obs,) = s.observers
     assert obs.cls == "estimators.alignment.AlignmentKalmanFilter"
-    assert list(obs.inputs) == ["ddy", "dpsi", "ddy_f"] and obs.truth == {"xi": "track.alignment_1"}
+    assert list(obs.measurements) == ["ddy", "dpsi", "ddy_f"] and obs.truth == {"xi": "track.alignment_1"}
     assert obs.settings == {"V": 20}
     assert s.warnings == [] and s.source == EXP
     assert list_variants(EXP) == ["harmonic", "psd"]

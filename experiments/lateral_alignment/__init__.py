@@ -5,7 +5,8 @@ at 20 m/s) drive the complete vehicle model (VehicleLateral, 23 DOF); a SensorNo
 the seed's sensor noise to the leading wheelset's lateral acceleration and yaw rate and its
 bogie frame's lateral acceleration; the alignment Kalman filter (estimators.alignment, the
 seed's eqs. 9-17 on the simplified model with the identified primary suspension) estimates
-the alignment online, and the RTS smoother offline. Variants: the conditions of seed
+the alignment online, and the RTS smoother (an offline observer, run on the record after the
+run) offline. Variants: the conditions of seed
 Tables 2-4.
 
 Training and test track: the SM is identified (identify.py), the filter's q_xi and
@@ -74,15 +75,14 @@ def _filter(settings: dict, dt: float):
 
 
 def metrics(signals: dict, estimates: dict, base: dict) -> dict:
-    """J_mm / J_rel per band for the filter (online estimate) and the smoother (offline), the
-    observability rank, and the estimator's wall time on the recorded 20 s."""
+    """J_mm / J_rel per band for the filter (online estimate) and the smoother (the offline
+    observer ``smoother``, run by the bank after the run), the observability rank, and the
+    estimators' wall time on the recorded 20 s."""
     from estimators.metrics import alignment_errors
 
     dt = base["step_size_s"]
     V = float(base["parameters"]["track"].get("V", 20.0))
     settings = base["observer_settings"]["alignment"]
-    # the smoother runs on its own equivalent SM (tune.py) when the SSD declares one
-    smoother_settings = base["observer_settings"].get("smoother", settings)
     t = np.asarray(signals["time"])
     truth = np.asarray(signals["track.alignment_1"])
     Z = np.column_stack([signals[c] for c in SENSOR_COLUMNS])
@@ -93,13 +93,9 @@ def metrics(signals: dict, estimates: dict, base: dict) -> dict:
     online = np.asarray(estimates["alignment.xi"])
     xi = kf.outputs.index("xi")
     assert np.array_equal(filtered[:, xi], online), "offline filter differs from the online observer"
-    ks = _filter(smoother_settings, dt)
-    t0 = time.perf_counter()
-    smoothed = ks.smooth(t, Z)
-    smoother_seconds = time.perf_counter() - t0
-    estimates["alignment.xi_smoothed"] = smoothed[:, xi]  # for plots(), which runs next
+    smoother = base["observers"]["smoother"]  # the offline observer's diagnostics
     f = alignment_errors(online, truth, V, dt, skip_s=START_UP_S)
-    s = alignment_errors(smoothed[:, xi], truth, V, dt, skip_s=START_UP_S)
+    s = alignment_errors(np.asarray(estimates["smoother.xi"]), truth, V, dt, skip_s=START_UP_S)
     whole_run = alignment_errors(online, truth, V, dt)
     return {
         "J_mm": f["J_mm"], "J_rel": f["J_rel"],
@@ -107,8 +103,8 @@ def metrics(signals: dict, estimates: dict, base: dict) -> dict:
         "J_mm_including_start_up": whole_run["J_mm"], "J_rel_including_start_up": whole_run["J_rel"],
         "scored_from_s": START_UP_S,
         "observability_rank": int(kf.observability_rank()),
-        "observability_rank_smoother_model": int(ks.observability_rank()),
-        "estimator_seconds": estimator_seconds, "smoother_seconds": smoother_seconds,
+        "observability_rank_smoother_model": int(smoother["observability_rank"]),
+        "estimator_seconds": estimator_seconds, "smoother_seconds": smoother["wall_time_s"],
         "alignment_rms_3_200_mm": float(f["J_mm"]["whole"] / f["J_rel"]["whole"]),
     }
 
@@ -128,9 +124,7 @@ def plots(signals: dict, estimates: dict, out: Path, metrics: dict) -> list[str]
     s = np.asarray(signals["track.position"])
     truth = np.asarray(signals["track.alignment_1"])
     est = np.asarray(estimates["alignment.xi"])
-    smoothed = estimates["alignment.xi_smoothed"]  # computed once, by metrics()
-    np.savetxt(out / "estimates_smoothed.csv", np.column_stack([signals["time"], smoothed]), delimiter=",",
-               header="time,alignment.xi_smoothed", comments="", fmt="%.17g")
+    smoothed = np.asarray(estimates["smoother.xi"])  # the offline observer's (estimates_smoother.csv)
 
     fig, ax = plt.subplots(figsize=(10, 3.6))  # Fig. 5 / Fig. 8
     ax.plot(s, 1e3 * truth, "k", lw=1.2, label="real alignment xi")

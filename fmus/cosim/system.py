@@ -45,16 +45,32 @@ class Connection:
 class ObserverSpec:
     """An estimator attached to the run (declared in the SSD's railfmu annotation).
 
-    ``cls`` is a dotted path ``package.module.Class``; ``inputs`` maps the observer's input
-    names to recorded signals ``component.variable``; ``truth`` maps estimate names to the
-    recorded signals they are scored against (metrics only, never fed to the estimator);
-    ``settings`` are keyword arguments of the class.
+    ``cls`` is a dotted path ``package.module.Class``; ``measurements`` and ``inputs`` (its
+    known inputs) map the observer's names to recorded signals ``component.variable``;
+    ``valid`` maps a measurement to a flag signal (nonzero: the measurement is there);
+    ``truth`` maps estimate names to the recorded signals they are scored against (metrics
+    only, never fed to the estimator); ``settings`` are keyword arguments of the class.
+    ``period``: its sample period in s (None: the system's step); ``event``: its
+    measurements arrive as events (None: as its class declares); ``offline``: run once on
+    the whole record after the run. ``units``: the unit of each bound signal that has one
+    (an ``fmus.ssp.units.Unit``), for the bank's unit checks.
     """
     name: str
     cls: str
-    inputs: dict[str, str]
+    measurements: dict[str, str] = field(default_factory=dict)
+    inputs: dict[str, str] = field(default_factory=dict)
     truth: dict[str, str] = field(default_factory=dict)
     settings: dict[str, Value] = field(default_factory=dict)
+    valid: dict[str, str] = field(default_factory=dict)
+    period: float | None = None
+    event: bool | None = None
+    offline: bool = False
+    units: dict[str, object] = field(default_factory=dict)
+
+    @property
+    def signals(self) -> list[str]:
+        """Every recorded signal it reads (fed or scored)."""
+        return [*self.measurements.values(), *self.inputs.values(), *self.valid.values(), *self.truth.values()]
 
 
 @dataclass

@@ -40,6 +40,7 @@ from .units import (
     IDENTITY,
     OURS,
     Affine,
+    Unit,
     UnitError,
     Units,
     compose,
@@ -505,11 +506,11 @@ class _Reader:
         a = self._annotation(self.system, OBSERVERS)
         observers = [self._observer(o) for o in a.iterfind("rf:Observers/rf:Observer", NS)] if a is not None else []
         if record:  # observers read recorded signals: make sure theirs are recorded
-            record += [s for o in observers for s in (*o.inputs.values(), *o.truth.values())]
+            record += [s for o in observers for s in o.signals]
         return list(dict.fromkeys(record)), observers
 
-    def _signal(self, el, where: str) -> str:
-        ref = el.get("connector")
+    def _signal(self, el, where: str, attr: str = "connector") -> str:
+        ref = el.get(attr)
         if not ref:
             raise UserError(f"{where}: no connector attribute (component.variable)")
         for name in sorted(self.comps, key=len, reverse=True):
@@ -521,6 +522,9 @@ class _Reader:
         raise UserError(f"{where} {ref!r}: no component {ref.partition('.')[0]!r}; {self.known()}")
 
     def _observer(self, el) -> ObserverSpec:
+        """``rf:Observer name class [samplePeriod] [sampling="periodic|event"] [offline]`` with
+        ``rf:Measurement name connector [valid]``, ``rf:Input`` (known inputs), ``rf:Truth``
+        and ``rf:Setting`` children."""
         name, cls = el.get("name"), el.get("class")
         where = f"{self.at(el)}: Observer {name!r}"
         if not name or not cls:
@@ -534,13 +538,45 @@ class _Reader:
                 out[e.get("name")] = e
             return out
 
-        return ObserverSpec(
-            name, cls,
-            inputs={k: self._signal(e, f"{self.at(e)}: Observer {name!r} Input {k!r}")
-                    for k, e in named("Input").items()},
-            truth={k: self._signal(e, f"{self.at(e)}: Observer {name!r} Truth {k!r}")
-                   for k, e in named("Truth").items()},
-            settings={k: _setting(e.get("value", "")) for k, e in named("Setting").items()})
+        def bound(tag: str) -> dict[str, str]:
+            return {k: self._signal(e, f"{self.at(e)}: Observer {name!r} {tag} {k!r}") for k, e in named(tag).items()}
+
+        period = self._number(el, "samplePeriod")
+        if period is not None and not (period > 0 and math.isfinite(period)):
+            raise UserError(f"{where}: samplePeriod {period:g} must be a positive number of seconds")
+        sampling = el.get("sampling")
+        if sampling not in (None, "periodic", "event"):
+            raise UserError(f"{where}: sampling {sampling!r} must be 'periodic' or 'event'")
+        offline = el.get("offline", "false")
+        if offline not in ("true", "false"):
+            raise UserError(f"{where}: offline {offline!r} must be true or false")
+        valid = {}
+        for k, e in named("Measurement").items():
+            if e.get("valid") is not None:
+                flag = self._signal(e, f"{self.at(e)}: Observer {name!r} Measurement {k!r} valid",
+                                    attr="valid")
+                valid[k] = flag
+        spec = ObserverSpec(
+            name, cls, measurements=bound("Measurement"), inputs=bound("Input"), truth=bound("Truth"),
+            settings={k: _setting(e.get("value", "")) for k, e in named("Setting").items()},
+            valid=valid, period=period, event=None if sampling is None else sampling == "event",
+            offline=offline == "true")
+        spec.units = {sig: u for sig in spec.signals if (u := self._signal_unit(sig, where)) is not None}
+        return spec
+
+    def _signal_unit(self, signal: str, where: str) -> Unit | None:
+        """The unit of a recorded signal: its FMU variable's, else the one its SSD connector
+        declares (an FMU variable without a unit, e.g. a generic sensor channel)."""
+        comp = next(c for n, c in sorted(self.comps.items(), key=lambda nc: -len(nc[0]))
+                    if signal.startswith(n + "."))
+        var = comp.vars[signal[len(comp.name) + 1:]]
+        name = var.unit or comp.connectors.get(var.name)
+        if not name:
+            return None
+        unit = self.ssd_units.then(comp.units).get(name)
+        if unit is None:
+            raise UserError(f"{where}: {signal}: unit {name!r} is not defined (declare it in ssd:Units)")
+        return unit
 
     def _unconnected(self, connections: list[Connection]) -> list[str]:
         fed = {(c.dst, c.dst_var) for c in connections}

@@ -104,6 +104,7 @@ def _document(system: System, mds: dict, resources: dict[str, str]):
     elements = _sub(sys_el, "ssd:Elements")
     used_units: dict[str, Units] = {}
     shown = _shown_variables(system)
+    observed_units = {sig: u for o in system.observers for sig, u in o.units.items()}
     for c in system.components:
         md = mds[c.name]
         units = Units(from_fmu(md)).then(OURS)
@@ -114,9 +115,13 @@ def _document(system: System, mds: dict, resources: dict[str, str]):
             connectors = _sub(comp, "ssd:Connectors")
             for v in declared:
                 conn = _sub(connectors, "ssd:Connector", name=v.name, kind=v.causality)
-                _sub(conn, f"ssc:{v.type}", unit=v.unit if v.type == "Real" and v.unit else None)
-                if v.type == "Real" and v.unit:
-                    used_units[v.unit] = units
+                unit, where = v.unit, units
+                seen = observed_units.get(f"{c.name}.{v.name}")
+                if not unit and seen is not None:  # a unit the SSD gave an FMU variable without one
+                    unit, where = seen.name, Units({seen.name: seen}).then(OURS)
+                _sub(conn, f"ssc:{v.type}", unit=unit if v.type == "Real" and unit else None)
+                if v.type == "Real" and unit:
+                    used_units[unit] = where
         if c.parameters:
             _parameters(comp, c, {v.name: v for v in md.modelVariables})
     if system.connections:
@@ -141,7 +146,7 @@ def _shown_variables(system: System) -> dict[str, set[str]]:
     out: dict[str, set[str]] = {}
     refs = [(k.src, k.src_var) for k in system.connections] + [(k.dst, k.dst_var) for k in system.connections]
     names = [c.name for c in system.components]
-    signals = list(system.record) + [s for o in system.observers for s in (*o.inputs.values(), *o.truth.values())]
+    signals = list(system.record) + [s for o in system.observers for s in o.signals]
     for s in signals:
         comp = next((n for n in sorted(names, key=len, reverse=True) if s.startswith(n + ".")), None)
         if comp:
@@ -205,9 +210,15 @@ def _system_annotations(sys_el, system: System) -> None:
         for o in system.observers:
             el = _sub(observers, "rf:Observer", name=o.name)
             el.set("class", o.cls)
-            for tag, table in (("rf:Input", o.inputs), ("rf:Truth", o.truth)):
+            if o.period is not None:
+                el.set("samplePeriod", _num(o.period))
+            if o.event is not None:
+                el.set("sampling", "event" if o.event else "periodic")
+            if o.offline:
+                el.set("offline", "true")
+            for tag, table in (("rf:Measurement", o.measurements), ("rf:Input", o.inputs), ("rf:Truth", o.truth)):
                 for k, ref in table.items():
-                    _sub(el, tag, name=k, connector=ref)
+                    _sub(el, tag, name=k, connector=ref, valid=o.valid.get(k) if tag == "rf:Measurement" else None)
             for k, v in o.settings.items():
                 _sub(el, "rf:Setting", name=k, value=str(v).lower() if isinstance(v, bool) else str(v))
     if system.record:
