@@ -91,13 +91,15 @@ def test_accelerating_run_equals_the_twin(track_fmu):
     out, t = drive(track_fmu, params, h, round(20.0 / h), lambda t: (0.5 * a * t * t, a * t))
     tr = TrackIrregularity(params)
     d, v = 0.5 * a * t * t, a * t
-    tab = tr.outputs(t, "tabulated", h=np.r_[0.0, np.full(t.size - 1, h)], distance=d, speed=v)
-    exact = tr.outputs(t, "exact", h=np.r_[0.0, np.full(t.size - 1, h)], distance=d, speed=v)
+    steps = np.r_[0.0, np.full(t.size - 1, h)]
+    tab = tr.outputs(t, "tabulated", h=steps, distance=d, speed=v)
+    sub = slice(None, None, 7)  # the cosine sum is slow: every 7th point
+    exact = tr.outputs(t[sub], "exact", h=steps[sub], distance=d[sub], speed=v[sub])
     bound_m, bound_slope = tabulation_error_bound(tr.params)
     for j, name in enumerate(OUT):
         rate = "rate" in name
         assert np.abs(out[:, j] - tab[name]).max() <= (1e-12 * 20 if rate else 1e-13), name
-        assert np.abs(out[:, j] - exact[name]).max() <= (bound_slope * 20 if rate else bound_m) + 1e-12, name
+        assert np.abs(out[sub, j] - exact[name]).max() <= (bound_slope * 20 if rate else bound_m) + 1e-12, name
 
 
 def test_rates_are_the_time_derivatives():
