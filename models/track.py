@@ -4,7 +4,8 @@ The ``TrackIrregularity`` FMU feeds the vehicle models with the rail deviations 
 of the four wheelsets of a coach on straight track, running at a constant speed ``V`` or, for
 stop-and-go and accelerating runs, at the travelled distance and speed given as inputs (see
 Position and speed). It has no states; its C code is hand written
-(``fmus/native/models/TrackIrregularity.c``) and ``tests/test_track.py`` proves it equals this module.
+(``fmus/native/models/TrackIrregularity.c``) and ``tests/test_track.py`` and
+``tests/test_track_position.py`` prove it equals this module.
 
 Irregularity variables
 ----------------------
@@ -139,7 +140,7 @@ wheelset) is multiplied by the raised-cosine weight of that wheelset's position 
            1                             s >= L_r
 
 and the rates follow the product rule, ``d(w x)/ds = w dx/ds + x dw/ds`` with
-``dw/ds = pi / (2 L_r) sin(pi s / L_r)`` on ``0 < s < L_r`` and 0 elsewhere (times ``V`` for
+``dw/ds = pi / (2 L_r) sin(pi s / L_r)`` on ``0 < s < L_r`` and 0 elsewhere (times ``v`` for
 the time rates). Why: a vehicle model and an estimator that both start from rest on ideal
 track are in equilibrium at t = 0; the run-in takes them onto the irregular track smoothly,
 as multibody track simulations do, instead of starting the vehicle centred while the rails
