@@ -22,6 +22,16 @@ from typing import Callable, Mapping, Sequence
 import numpy as np
 import sympy as sp
 
+#: The communication step ``h`` (s) of the step that ended at the current time ``t`` (0 in
+#: initialisation mode), for output expressions that switch at given times; C: the runtime's
+#: ``m->stepSize``.
+STEP_SIZE = sp.Symbol("h", real=True)
+#: A boundary (a sample or switching instant) that lies less than this fraction of ``h``
+#: after a communication point counts as reached there: masters compute their time as
+#: ``n h`` or accumulate ``t += h``, 2.2e-5 h apart after 1e6 steps, 1.8e-3 h after 1e7
+#: (measured at 1 ms and 0.1 ms). The runtime's ``STEP_TOLERANCE`` (model.h), the same value.
+STEP_TOLERANCE = 1e-2
+
 
 @dataclass
 class Variable:
@@ -146,7 +156,7 @@ class Model:
         return exprs
 
     def _args(self) -> list[sp.Symbol]:
-        return [sp.Symbol("t", real=True), *[s.symbol for s in self.states],
+        return [sp.Symbol("t", real=True), STEP_SIZE, *[s.symbol for s in self.states],
                 *[u.symbol for u in self.inputs], *[p.symbol for p in self.parameters]]
 
     def _lambdify(self, key: str, exprs: Sequence[sp.Expr]) -> Callable:
@@ -155,10 +165,11 @@ class Model:
             cache[key] = sp.lambdify(self._args(), list(exprs), modules="numpy", cse=True)
         return cache[key]
 
-    def _call(self, fn: Callable, t: float, x, u: Mapping[str, float] | None, p: Mapping[str, float] | None):
+    def _call(self, fn: Callable, t: float, x, u: Mapping[str, float] | None, p: Mapping[str, float] | None,
+              h: float = 0.0):
         p = {**self.default_parameters(), **(p or {})}
         u = {**{v.name: v.start for v in self.inputs}, **(u or {})}
-        return fn(t, *x, *[u[v.name] for v in self.inputs], *[p[v.name] for v in self.parameters])
+        return fn(t, h, *x, *[u[v.name] for v in self.inputs], *[p[v.name] for v in self.parameters])
 
     def rhs(self, p: Mapping[str, float] | None = None, u: Callable[[float], Mapping[str, float]] | None = None):
         """Return f(t, x) for scipy.integrate.solve_ivp; ``u(t)`` gives the inputs by name."""
@@ -170,10 +181,11 @@ class Model:
         return f
 
     def outputs_at(self, t: float, x, u: Mapping[str, float] | None = None,
-                   p: Mapping[str, float] | None = None) -> dict[str, float]:
-        """All outputs (states included) at one instant."""
+                   p: Mapping[str, float] | None = None, h: float = 0.0) -> dict[str, float]:
+        """All outputs (states included) at one instant, reached by a communication step
+        ``h`` (s; 0: initialisation mode), which only expressions with :data:`STEP_SIZE` use."""
         fn = self._lambdify("outputs", [o.expr for o in self.outputs])
-        vals = self._call(fn, t, x, u, p)
+        vals = self._call(fn, t, x, u, p, h)
         out = {s.name: float(xi) for s, xi in zip(self.states, x)}
         out.update({o.name: float(v) for o, v in zip(self.outputs, vals)})
         return out

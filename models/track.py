@@ -1,9 +1,11 @@
 r"""Track irregularity source: ERRI B176 random track + harmonic + step + measured profile.
 
 The ``TrackIrregularity`` FMU feeds the vehicle models with the rail deviations under each
-of the four wheelsets of a coach running at constant speed ``V`` on straight track. It has
-parameters and outputs only (no states, no inputs); its C code is hand written
-(``fmus/native/models/TrackIrregularity.c``) and ``tests/test_track.py`` proves it equals this module.
+of the four wheelsets of a coach on straight track, running at a constant speed ``V`` or, for
+stop-and-go and accelerating runs, at the travelled distance and speed given as inputs (see
+Position and speed). It has no states; its C code is hand written
+(``fmus/native/models/TrackIrregularity.c``) and ``tests/test_track.py`` and
+``tests/test_track_position.py`` prove it equals this module.
 
 Irregularity variables
 ----------------------
@@ -91,16 +93,41 @@ Deterministic components (all components add up)
   ends); outside ``[s[0], s[-1]]`` it contributes 0. In the FMU a relative path is resolved
   against the FMU's ``resources/`` folder.
 
+Position and speed
+------------------
+``distance_input`` selects where the leading wheelset is and how fast it goes::
+
+    distance_input = false (default):   s_1(t) = s_start + V t              v = V
+    distance_input = true:              s_1(t) = s_start + distance(t)      v = speed(t)
+
+with the inputs ``distance`` (m, travelled by the vehicle since the start; it may stop and
+go, or run backwards) and ``speed`` (m/s, d distance/dt), e.g. from a longitudinal train or
+trolley model. At constant speed the inputs are not read, and the outputs are bit-identical
+to what they were before the inputs existed; fed with ``distance = V t`` and ``speed = V``
+the position mode gives the same numbers. Why a parameter and not inputs that default to
+``s = V t``: an FMI input starts at a constant, which cannot be ``V t``; the parameter makes
+the mode explicit in the experiment's ``.ssv``. The outputs at a communication point are
+those of the inputs set there; read after a step before new inputs are set, the distance is
+extrapolated with the speed, ``distance + speed (t - t_set)`` (first-order hold, as the
+wheelset's ``xi`` with ``xi_rate``).
+
 Wheelsets and outputs
 ---------------------
-Wheelset ``i`` is at ``s_i(t) = s_start + V t - axle_position_i``; the outputs are the values
-at ``s_i`` and the rates ``d/dt = V d/ds``::
+Wheelset ``i`` is at ``s_i = s_1 - axle_position_i``; the outputs are the values at ``s_i``
+and the rates ``d/dt = v d/ds`` (chain rule)::
 
-    position            = s_1(t)                                   m
+    position            = s_1                                      m
     alignment_i         = xi_a(s_i)                                m
     vertical_left_i     = xi_vp(s_i) + b theta(s_i)                m
     vertical_right_i    = xi_vp(s_i) - b theta(s_i)                m
-    *_rate_i            = V d/ds (...)(s_i)                        m/s
+    *_rate_i            = v d/ds (...)(s_i)                        m/s
+
+With ``v = 0`` the outputs hold and the rates are zero. The step counts as reached at a
+communication point when ``s_i >= step_position - eps |v| h``, with ``h`` the communication
+step that ended there (0 in initialisation mode) and ``eps = models.base.STEP_TOLERANCE``
+= 0.01: a step on the master's grid (``step_position = s_start + V n h``) then switches at
+that grid point however the master computes its time (``n h``, or ``t += h``, which drifts
+by up to 1.8e-3 h after 1e7 steps), and one between grid points keeps its place.
 
 Run-in
 ------
@@ -113,7 +140,7 @@ wheelset) is multiplied by the raised-cosine weight of that wheelset's position 
            1                             s >= L_r
 
 and the rates follow the product rule, ``d(w x)/ds = w dx/ds + x dw/ds`` with
-``dw/ds = pi / (2 L_r) sin(pi s / L_r)`` on ``0 < s < L_r`` and 0 elsewhere (times ``V`` for
+``dw/ds = pi / (2 L_r) sin(pi s / L_r)`` on ``0 < s < L_r`` and 0 elsewhere (times ``v`` for
 the time rates). Why: a vehicle model and an estimator that both start from rest on ideal
 track are in equilibrium at t = 0; the run-in takes them onto the irregular track smoothly,
 as multibody track simulations do, instead of starting the vehicle centred while the rails
@@ -148,6 +175,16 @@ profile_file                (string) ""        CSV table, none when empty
 profile_scale               ""       1         factor on the table
 run_in_length               m        0         raised-cosine ramp from s = 0 (see Run-in);
                                                0: none
+distance_input              (bool)   false     true: position and speed from the inputs
+=========================== ======== ========= ==========================================
+
+Inputs (read only when ``distance_input`` is true)
+--------------------------------------------------
+=========================== ======== ========= ==========================================
+name                        unit     start     meaning
+=========================== ======== ========= ==========================================
+distance                    m        0         distance travelled since the start
+speed                       m/s      0         speed along the track, d distance / dt
 =========================== ======== ========= ==========================================
 
 Python API: :data:`TRACK` (the model definition), :func:`psd_alignment`,
@@ -166,7 +203,7 @@ from typing import Mapping
 
 import numpy as np
 
-from models.base import Model, Output, Parameter
+from models.base import STEP_TOLERANCE, Input, Model, Output, Parameter
 
 # ---- ERRI B176 spectra ---------------------------------------------------------------------
 
@@ -554,9 +591,10 @@ class TrackIrregularity:
         return _hermite(t, h, gv[:, n], gd[:, n], gv[:, n1], gd[:, n1])
 
     # -- rails --
-    def rails(self, s, method: str = "exact") -> dict[str, np.ndarray]:
+    def rails(self, s, method: str = "exact", reach=0.0) -> dict[str, np.ndarray]:
         """All components summed at track positions ``s`` (m); ``method`` 'exact' (cosine sum)
-        or 'tabulated' (the FMU's interpolation) for the random part."""
+        or 'tabulated' (the FMU's interpolation) for the random part; a step less than
+        ``reach`` (m) ahead of ``s`` counts as reached (the FMU's eps |v| h)."""
         p = self.params
         s = np.asarray(s, dtype=float)
         if method == "exact":
@@ -578,7 +616,7 @@ class TrackIrregularity:
         zl, zl_d = zl + Az * sn, zl_d + Az * k * cs
         zr, zr_d = zr + Az * sn, zr_d + Az * k * cs
         # step (its Dirac derivative is ignored)
-        on = s >= p["step_position"]
+        on = s >= p["step_position"] - reach
         ali = ali + np.where(on, p["step_lateral"], 0.0)
         zl = zl + np.where(on, p["step_vertical"], 0.0)
         zr = zr + np.where(on, p["step_vertical"], 0.0)
@@ -596,23 +634,38 @@ class TrackIrregularity:
         return {"alignment": ali, "vertical_left": zl, "vertical_right": zr,
                 "alignment_ds": ali_d, "vertical_left_ds": zl_d, "vertical_right_ds": zr_d}
 
-    def wheelset_positions(self, t) -> np.ndarray:
-        """s_i(t) = s_start + V t - axle_position_i, shape (4, *t.shape)."""
+    def _motion(self, t, distance, speed) -> tuple[np.ndarray, np.ndarray]:
+        """(s_1, v): s_start + V t and V, or s_start + distance and speed (distance_input)."""
         p = self.params
         t = np.asarray(t, dtype=float)
-        front = p["s_start"] + p["V"] * t
-        return np.array([front - p[f"axle_position_{i}"] for i in range(1, 5)])
+        if not p["distance_input"]:
+            return p["s_start"] + p["V"] * t, np.full(t.shape, float(p["V"]))
+        if distance is None or speed is None:
+            raise ValueError("distance_input is true: give the distance (m) and speed (m/s) at t")
+        d = np.broadcast_to(np.asarray(distance, dtype=float), t.shape)
+        v = np.broadcast_to(np.asarray(speed, dtype=float), t.shape)
+        return p["s_start"] + d, v
 
-    def outputs(self, t, method: str = "exact") -> dict[str, np.ndarray]:
-        """The FMU's outputs (by name) at times ``t`` (s)."""
+    def wheelset_positions(self, t, distance=None) -> np.ndarray:
+        """s_i = s_1 - axle_position_i, shape (4, *t.shape), with s_1 = s_start + V t, or
+        s_start + ``distance`` (m, at t) when distance_input is true."""
+        front, _ = self._motion(t, distance, 0.0)
+        return np.array([front - self.params[f"axle_position_{i}"] for i in range(1, 5)])
+
+    def outputs(self, t, method: str = "exact", h=0.0, distance=None, speed=None) -> dict[str, np.ndarray]:
+        """The FMU's outputs (by name) at communication points ``t`` (s) reached by steps ``h``
+        (s, scalar or per point; 0: initialisation mode; it only places a step on the grid).
+        With distance_input, ``distance`` (m) and ``speed`` (m/s) are the inputs at ``t``
+        (set there: no extrapolation)."""
         p = self.params
-        pos = self.wheelset_positions(t)
-        out = {"position": pos[0]}
+        front, v = self._motion(t, distance, speed)
+        reach = STEP_TOLERANCE * np.abs(v) * np.asarray(h, dtype=float)
+        out = {"position": front - p["axle_position_1"]}
         for i in range(4):
-            r = self.rails(pos[i], method)
+            r = self.rails(front - p[f"axle_position_{i + 1}"], method, reach)
             for name in ("alignment", "vertical_left", "vertical_right"):
                 out[f"{name}_{i + 1}"] = r[name]
-                out[f"{name}_rate_{i + 1}"] = p["V"] * r[name + "_ds"]
+                out[f"{name}_rate_{i + 1}"] = v * r[name + "_ds"]
         return out
 
 
@@ -627,15 +680,16 @@ def _axle_positions() -> list[Parameter]:
 
 
 def _outputs() -> list[Output]:
-    out = [Output("position", "track position s_1 of the leading wheelset (s_start + V t)", unit="m")]
+    out = [Output("position", "track position s_1 of the leading wheelset (s_start + V t, or "
+                  "s_start + distance)", unit="m")]
     for i in range(1, 5):
         out += [
             Output(f"alignment_{i}", f"lateral alignment of both rails at wheelset {i}", unit="m"),
-            Output(f"alignment_rate_{i}", f"time derivative of alignment_{i} (V d/ds)", unit="m/s"),
+            Output(f"alignment_rate_{i}", f"time derivative of alignment_{i} (v d/ds)", unit="m/s"),
             Output(f"vertical_left_{i}", f"vertical deviation of the left rail at wheelset {i}", unit="m"),
             Output(f"vertical_right_{i}", f"vertical deviation of the right rail at wheelset {i}", unit="m"),
-            Output(f"vertical_left_rate_{i}", f"time derivative of vertical_left_{i} (V d/ds)", unit="m/s"),
-            Output(f"vertical_right_rate_{i}", f"time derivative of vertical_right_{i} (V d/ds)", unit="m/s"),
+            Output(f"vertical_left_rate_{i}", f"time derivative of vertical_left_{i} (v d/ds)", unit="m/s"),
+            Output(f"vertical_right_rate_{i}", f"time derivative of vertical_right_{i} (v d/ds)", unit="m/s"),
         ]
     return out
 
@@ -702,6 +756,15 @@ TRACK = Model(
                   "s = 0 (raised cosine); 0: no run-in", unit="m", start=0.0, min=0.0,
                   source="choice: vehicle and estimator start in equilibrium on ideal track and "
                   "run onto the irregular track smoothly, as multibody track simulations do"),
+        Parameter("distance_input", "take the position and speed from the inputs distance and speed "
+                  "(stop-and-go, accelerating runs); false: constant speed V", unit="", start=False,
+                  type="Boolean", source="choice: constant V is the case of Muñoz et al. and Onat et al. (2016)"),
+    ],
+    inputs=[
+        Input("distance", "distance travelled by the vehicle since the start, s_1 = s_start + "
+              "distance (read when distance_input is true)", unit="m", start=0.0, rate="speed"),
+        Input("speed", "speed along the track, d distance/dt; the rates are speed d/ds (read when "
+              "distance_input is true)", unit="m/s", start=0.0),
     ],
     outputs=_outputs(),
     c_sources=["TrackIrregularity.c"],

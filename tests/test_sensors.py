@@ -108,9 +108,18 @@ def test_uniforms_range_and_bad_arguments():
 
 def test_sample_index_on_a_floating_point_grid():
     t = np.arange(20001) * 1e-3  # 173 of these fall just below their sample: 2001 * 1e-3 / 1e-3 < 2001
-    np.testing.assert_array_equal(sample_index(t, 0.0, 1e-3), np.arange(20001))
-    np.testing.assert_array_equal(sample_index(np.cumsum(np.full(1000, 1e-3)), 0.0, 1e-3), np.arange(1, 1001))
-    np.testing.assert_array_equal(sample_index(5.0 + np.arange(8) * 0.25e-3, 5.0, 1e-3), [0, 0, 0, 0, 1, 1, 1, 1])
+    assert np.count_nonzero(np.floor(t / 1e-3) != np.arange(20001)) == 173
+    np.testing.assert_array_equal(sample_index(t, 0.0, 1e-3, 1e-3), np.arange(20001))
+    np.testing.assert_array_equal(sample_index(np.cumsum(np.full(1000, 1e-3)), 0.0, 1e-3, 1e-3), np.arange(1, 1001))
+    np.testing.assert_array_equal(sample_index(5.0 + np.arange(8) * 0.25e-3, 5.0, 1e-3, 0.25e-3),
+                                  [0, 0, 0, 0, 1, 1, 1, 1])
+    # the band: a sample instant less than 1 % of min(h, T) ahead is reached
+    T = 1e-3
+    assert sample_index(T - 0.009 * T, 0.0, T, T) == 1 and sample_index(T - 0.011 * T, 0.0, T, T) == 0
+    assert sample_index(T - 0.0009 * T, 0.0, T, 0.1 * T) == 1  # h < T: 1 % of h
+    assert sample_index(T - 0.0011 * T, 0.0, T, 0.1 * T) == 0
+    assert sample_index(10 * T - 0.011 * T, 0.0, T, 10 * T) == 9  # h > T: 1 % of T, not of h
+    assert sample_index(0.0, 0.0, T, 0.0) == 0  # initialisation mode
 
 
 # ---- the FMU ---------------------------------------------------------------------------------
@@ -125,12 +134,12 @@ def test_fmu_equals_python_bit_for_bit(sensors_fmu):
     with Slave(sensors_fmu, "s") as s:
         s.initialize(0.0, None, params)
         fmu = _drive(s, t, u)
-    twin = SensorNoise(params).outputs(t, {f"u_{i}": u[:, i - 1] for i in CH})
+    twin = SensorNoise(params).outputs(t, 1e-3, {f"u_{i}": u[:, i - 1] for i in CH})
     for i in CH:
         assert np.array_equal(fmu[:, i - 1], twin[f"y_{i}"]), i
     # and through FMPy's simulate_fmu (another driver, constant inputs at their start 0)
     tt, y = _noise_run(sensors_fmu, {**SIGMAS, "seed": 99}, stop=2.0)
-    twin = SensorNoise({**SIGMAS, "seed": 99}).outputs(tt)
+    twin = SensorNoise({**SIGMAS, "seed": 99}).outputs(tt, 1e-3)
     for i in CH:
         assert np.array_equal(y[i - 1], twin[f"y_{i}"]), i
 
@@ -189,7 +198,7 @@ def test_noise_is_held_over_a_sample_and_independent_of_the_step(sensors_fmu, st
     with Slave(sensors_fmu, "s") as s:
         s.initialize(t0, None, params)
         y = _drive(s, t)
-    k = sample_index(t, t0, T)
+    k = sample_index(t, t0, T, step)
     for i in CH:
         expected = SIGMAS[f"sigma_{i}"] * noise(8, i, k)
         assert np.array_equal(y[:, i - 1], expected), i
@@ -235,7 +244,7 @@ def test_saved_state_reproduces_the_noise(sensors_fmu):
         other.fmu.setFMUstate(restored)
         other.fmu.freeFMUstate(restored)
         assert np.array_equal(_drive(other, t[100:], u[100:]), first)
-    twin = SensorNoise(params).outputs(t[100:], {f"u_{i}": u[100:, i - 1] for i in CH})
+    twin = SensorNoise(params).outputs(t[100:], h, {f"u_{i}": u[100:, i - 1] for i in CH})
     assert np.array_equal(first, np.array([twin[y] for y in Y]).T)
 
 
@@ -308,7 +317,7 @@ def test_in_a_cosimulation(fmu_dir):
     res = {m: run(_system(fmu_dir, rec), m, progress=False).data for m in ("jacobi", "gauss-seidel", "container")}
     assert np.array_equal(res["container"], res["jacobi"])
     for data in res.values():
-        k = sample_index(data[:, 0], 0.0, 1e-3)
+        k = sample_index(data[:, 0], 0.0, 1e-3, 1e-3)
         for j, i in enumerate((1, 2, 3)):
             sigma = SEED000_SENSORS[f"sigma_{i}"]
             truth, y = data[:, 1 + j], data[:, 4 + j]

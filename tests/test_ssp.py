@@ -281,9 +281,12 @@ def test_unit_mismatch(fmu_dir, tmp_path):
 def test_unconnected_input_warns(fmu_dir, tmp_path):
     write_ssd(tmp_path, connections=ALIGNMENT)
     s = read_system(tmp_path, fmu_dirs=[fmu_dir])
-    assert s.warnings == ["wheelset.xi_rate: input not connected; keeps its start value 0"]
+    assert s.warnings == ["track.distance: input not connected; keeps its start value 0",
+                          "track.speed: input not connected; keeps its start value 0",
+                          "wheelset.xi_rate: input not connected; keeps its start value 0"]
     # an input given a value on purpose (a binding, a variant or --set) is not warned about
-    bound = read_system(tmp_path, fmu_dirs=[fmu_dir], overrides={"wheelset": {"xi_rate": 0.0}})
+    bound = read_system(tmp_path, fmu_dirs=[fmu_dir], overrides={"wheelset": {"xi_rate": 0.0},
+                                                                 "track": {"distance": 0.0, "speed": 0.0}})
     assert bound.warnings == [] and bound.component("wheelset").parameters["xi_rate"] == 0.0
 
 

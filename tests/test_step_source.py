@@ -57,7 +57,7 @@ def test_equals_python_definition_and_runs_in_fmpy(fmu_dir):
     params = {"initial_value": 1.0, "final_value": 0.5, "step_time": 0.3}
     res = simulate_fmu(str(fmu_dir / "StepSource.fmu"), stop_time=1.0, step_size=1e-2, output_interval=1e-2,
                        start_values=params)
-    expected = [STEP_SOURCE.outputs_at(t, [], None, params)["y"] for t in res["time"]]
+    expected = [STEP_SOURCE.outputs_at(t, [], None, params, h=1e-2 if t > 0 else 0.0)["y"] for t in res["time"]]
     assert np.array_equal(res["y"], expected)
     assert res["y"][np.argmin(np.abs(res["time"] - 0.29))] == 1.0
     assert res["y"][np.argmin(np.abs(res["time"] - 0.30))] == 0.5
@@ -67,3 +67,22 @@ def test_output_has_no_unit():
     """Generic: it connects to an input of any unit (the coach's k1 in N/m)."""
     assert STEP_SOURCE.variable("y").unit == ""
     assert STEP_SOURCE.variable("step_time").unit == "s"
+
+
+@pytest.mark.parametrize("accumulate", [False, True])
+def test_step_on_the_grid_switches_there_after_many_steps(fmu_dir, accumulate):
+    """A step at communication point 7,212 of 10 ms (72.12 s) switches exactly there with the
+    master's time as k h or as t += h (1.4e-14 s below 72.12 there)."""
+    t, y = run(fmu_dir, {"initial_value": 0.0, "final_value": 1.0, "step_time": 72.12}, stop=80.0,
+               accumulate=accumulate)
+    assert not accumulate or t[7212] < 72.12
+    assert np.all(y[:7212] == 0.0) and np.all(y[7212:] == 1.0)
+
+
+def test_the_band_is_one_percent_of_the_step():
+    """Python definition: reached at t when t >= step_time - 0.01 h; exact in
+    initialisation mode (h = 0)."""
+    y = lambda t, ts, h: STEP_SOURCE.outputs_at(t, [], None, {"step_time": ts}, h=h)["y"]  # noqa: E731
+    assert y(1.0, 1.0 + 0.0099 * 0.1, 0.1) == 1.0
+    assert y(1.0, 1.0 + 0.0101 * 0.1, 0.1) == 0.0
+    assert y(0.0, 1e-12, 0.0) == 0.0 and y(0.0, 0.0, 0.0) == 1.0

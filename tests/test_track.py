@@ -223,6 +223,12 @@ def test_bad_parameters_python():
 
 # ---- 4. the FMU equals Python ----------------------------------------------------------------
 
+def fmpy_steps(t):
+    """The communication steps simulate_fmu took to reach ``t`` (its h is the difference of
+    its grid times; 0 at the start: initialisation mode), for the twin's step tolerance."""
+    return np.diff(np.asarray(t), prepend=t[0])
+
+
 @pytest.fixture(scope="module")
 def track_fmu(fmu_dir):
     return fmu_dir / "TrackIrregularity.fmu"
@@ -243,8 +249,9 @@ def _fmu_equals_python(track_fmu, params, run_in=0.0):
     res = simulate_fmu(str(track_fmu), start_values=params, stop_time=10.0, output_interval=0.005,
                        output=[o.name for o in TRACK.outputs])
     tr = TrackIrregularity(params)
-    tab = tr.outputs(res["time"], "tabulated")
-    exact = tr.outputs(res["time"], "exact")
+    h = fmpy_steps(res["time"])
+    tab = tr.outputs(res["time"], "tabulated", h)
+    exact = tr.outputs(res["time"], "exact", h)
     bound_m, bound_slope = tabulation_error_bound(tr.params)
     V = tr.params["V"]
     extra = math.pi / (2 * run_in) * bound_m if run_in > 0 else 0.0
@@ -287,7 +294,7 @@ def test_fmu_fine_grid_equals_cosine_sum(track_fmu):
 
     params = {"seed": 21, "psd_level": 2, "grid_step": 0.0125}
     res = simulate_fmu(str(track_fmu), start_values=params, stop_time=2.0, output_interval=0.01)
-    exact = TrackIrregularity(params).outputs(res["time"])
+    exact = TrackIrregularity(params).outputs(res["time"], h=fmpy_steps(res["time"]))
     bound_m, _ = tabulation_error_bound({**TRACK.default_parameters(), **params})
     assert bound_m < 2e-10
     for name in exact:
@@ -422,7 +429,8 @@ def test_fmu_equals_python_with_run_in(track_fmu, tmp_path):
     params = _run_in_params(tmp_path, RUN_IN)
     res, tr, tab, _ = _fmu_equals_python(track_fmu, params, run_in=RUN_IN)
     # the run-in is really there: zero before s = 0, not the unweighted track in the ramp
-    plain = TrackIrregularity({**params, "run_in_length": 0.0}).outputs(res["time"], "tabulated")
+    plain = TrackIrregularity({**params, "run_in_length": 0.0}).outputs(res["time"], "tabulated",
+                                                                       fmpy_steps(res["time"]))
     s1 = np.asarray(res["position"])
     ramp = (s1 > 1.0) & (s1 < RUN_IN - 1.0)
     for name in ("alignment_1", "alignment_rate_1", "vertical_left_1", "vertical_right_rate_1"):

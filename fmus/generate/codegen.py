@@ -17,7 +17,7 @@ from xml.sax.saxutils import quoteattr
 
 import sympy as sp
 
-from models.base import Model, Output, Parameter, Variable
+from models.base import STEP_SIZE, Model, Output, Parameter, Variable
 
 from ..units import UNITS, check_unit
 
@@ -45,7 +45,7 @@ def layout(model: Model) -> list[Slot]:
     """Every ScalarVariable of the FMU in modelDescription order, with its value reference."""
     for v in model.variables:
         check_unit(v.unit, f"{model.identifier}.{v.name}")
-        if v.name in ("time", INTEGRATOR_STEP):
+        if v.name in ("time", INTEGRATOR_STEP, "t", STEP_SIZE.name):  # t, h: free symbols
             raise ValueError(f"{model.identifier}: variable name {v.name!r} is reserved")
     counters = {"Real": 1, "Integer": 0, "Boolean": 0, "String": 0}
 
@@ -304,6 +304,8 @@ def equations_c(model: Model) -> str:
     # derivatives: states from x[], inputs held over the step, or first-order hold with a rate
     ders = model.derivative_exprs(hold_tau=TAU)
     body, free = _assign_block(model, ders, [f"dx[{k}]" for k in range(len(ders))], source(True))
+    if STEP_SIZE.name in free:
+        raise ValueError(f"{model.identifier}: the communication step h is for output expressions only")
     L.append("void model_derivatives(ModelInstance *m, double t, const double *x, double *dx) {")
     if "v_tau" in free:
         L.append("    const double v_tau = t - m->inputTime; /* first-order hold of the inputs */")
@@ -319,6 +321,8 @@ def equations_c(model: Model) -> str:
     L.append("int model_outputs(ModelInstance *m) {")
     if "t" in free:
         L.append("    const double t = m->r[0];")
+    if STEP_SIZE.name in free:
+        L.append(f"    const double {STEP_SIZE.name} = m->stepSize; /* the step that ended at t */")
     if "v_tau" in free:
         L.append("    const double v_tau = m->r[0] - m->inputTime; /* first-order hold of the inputs */")
     L += body + ["    return 0;", "}", ""]

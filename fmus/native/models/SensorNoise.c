@@ -2,12 +2,15 @@
  * whose docstring is this model's documentation; tests/test_sensors.py proves this C equals
  * the Python bit for bit).
  *
- *   k   = floor((t - t0) / sample_period + 1e-9)
+ *   k   = floor((t - t0) / T + STEP_TOLERANCE min(h / T, 1))    T = sample_period
  *   y_i = gain_i u_i + bias_i + sigma_i w_i(k)      (y_i = u_i when enabled is false)
  *
  * w_i(k) is counter-based Gaussian white noise: a pure function of (seed, i, k) built from
  * the SplitMix64 output function and Box-Muller, so it needs no generator state (FMU state
- * get/set, any importer and any step size give the same noise) and no model data.
+ * get/set, any importer and any step size give the same noise) and no model data. h is the
+ * communication step that ended at t (0 in initialisation mode): a sample instant within
+ * STEP_TOLERANCE min(h, T) after t counts as reached, so k is the same whether the master
+ * computes t = t0 + n h or accumulates t += h (model.h).
  *
  * The variable tables (model_real_info, ...) are generated from the Python definition into
  * a separate file; the VR_/VRI_/VRB_ defines come from the generated model_config.h.
@@ -18,7 +21,6 @@
 #include "model.h"
 
 #define N_CHANNELS 8
-#define SAMPLE_TOLERANCE 1e-9
 #define MAX_SAMPLE 9007199254740992.0 /* 2^53: sample indices stay exact doubles */
 
 static const double PI = 3.14159265358979323846; /* == Python's math.pi */
@@ -94,14 +96,15 @@ void model_derivatives(ModelInstance *m, double t, const double *x, double *dx) 
 
 int model_outputs(ModelInstance *m) {
     double *r = m->r;
-    double kd;
+    double T, kd;
     uint64_t k, seed;
     int j;
     if (!m->b[VRB_enabled]) {
         for (j = 0; j < N_CHANNELS; j++) r[VR_Y[j]] = r[VR_U[j]];
         return 0;
     }
-    kd = floor((r[0] - m->startTime) / r[VR_sample_period] + SAMPLE_TOLERANCE);
+    T = r[VR_sample_period];
+    kd = floor((r[0] - m->startTime) / T + STEP_TOLERANCE * fmin(m->stepSize / T, 1.0));
     if (kd < 0) kd = 0; /* not before the start */
     if (!(kd < MAX_SAMPLE)) {
         model_error(m, "SensorNoise: t = %.17g is more than 2^53 samples of sample_period = %g "

@@ -9,6 +9,9 @@
  * Deterministic parts: harmonic, step, measured profile table (CSV, Catmull-Rom Hermite).
  * Run-in (run_in_length > 0): the sum times a raised-cosine weight of s, rates by the product
  * rule (as models.track.run_in_weight and TrackIrregularity.rails).
+ * Position: s_1 = s_start + V t at constant speed, or s_start + distance with the speed v
+ * from the inputs (distance_input = true); rates d/dt = v d/ds. The step counts as reached
+ * within STEP_TOLERANCE |v| h of a communication point (model.h).
  *
  * The variable tables (model_real_info, ...) are generated from the Python definition into
  * a separate file; the VR_/VRI_/VRS_ defines come from the generated model_config.h.
@@ -529,16 +532,28 @@ void model_derivatives(ModelInstance *m, double t, const double *x, double *dx) 
 int model_outputs(ModelInstance *m) {
     const TrackData *d = (const TrackData *)m->modelData;
     double *r = m->r;
-    const double V = r[VR_V], b = r[VR_half_contact_width];
-    const double front = r[VR_s_start] + V * r[0];
+    const double b = r[VR_half_contact_width];
     const double kh = 2.0 * PI / r[VR_harmonic_wavelength];
     const double Ay = r[VR_harmonic_lateral_amplitude], Az = r[VR_harmonic_vertical_amplitude];
     const double g = r[VR_profile_scale], run_in = r[VR_run_in_length];
+    double speed, front, step_at; /* speed: v of the docs (v[] is taken below) */
     int i;
     if (!d) {
         model_error(m, "TrackIrregularity: outputs requested before initialisation");
         return -1;
     }
+    if (m->b[VRB_distance_input]) {
+        /* distance and speed as set at inputTime; read after a step, before new inputs,
+           the distance is extrapolated with the speed (first-order hold) */
+        const double tau = r[0] - m->inputTime;
+        speed = r[VR_speed];
+        front = r[VR_s_start] + (tau != 0.0 ? r[VR_distance] + speed * tau : r[VR_distance]);
+    } else {
+        speed = r[VR_V];
+        front = r[VR_s_start] + speed * r[0];
+    }
+    /* a step within STEP_TOLERANCE of the last step's travel ahead is reached (model.h) */
+    step_at = r[VR_step_position] - STEP_TOLERANCE * fabs(speed) * m->stepSize;
     r[VR_position] = front - r[VR_AXLE[0]];
     for (i = 0; i < N_WHEELSETS; i++) {
         const double s = front - r[VR_AXLE[i]];
@@ -559,7 +574,7 @@ int model_outputs(ModelInstance *m) {
             zr += Az * sn;
             zr_d += Az * kh * cs;
         }
-        if (s >= r[VR_step_position]) { /* the Dirac derivative of the step is ignored */
+        if (s >= step_at) { /* the Dirac derivative of the step is ignored */
             ali += r[VR_step_lateral];
             zl += r[VR_step_vertical];
             zr += r[VR_step_vertical];
@@ -584,11 +599,11 @@ int model_outputs(ModelInstance *m) {
             zr = w * zr;
         }
         r[VR_ALIGNMENT[i]] = ali;
-        r[VR_ALIGNMENT_RATE[i]] = V * ali_d;
+        r[VR_ALIGNMENT_RATE[i]] = speed * ali_d;
         r[VR_LEFT[i]] = zl;
         r[VR_RIGHT[i]] = zr;
-        r[VR_LEFT_RATE[i]] = V * zl_d;
-        r[VR_RIGHT_RATE[i]] = V * zr_d;
+        r[VR_LEFT_RATE[i]] = speed * zl_d;
+        r[VR_RIGHT_RATE[i]] = speed * zr_d;
     }
     return 0;
 }

@@ -34,6 +34,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <float.h>
 #include <math.h>
 
 #include "model.h"
@@ -92,6 +93,7 @@ typedef struct {
     fmi2Boolean stopTimeDefined;
     double lastSuccessfulTime;
     double inputTime;
+    double stepSize;
     fmi2Real r[N_REAL];
 #if N_INTEGER > 0
     fmi2Integer i[N_INTEGER];
@@ -109,11 +111,12 @@ typedef struct {
 static double abs_d(double x) { return x < 0 ? -x : x; }
 static double max_d(double a, double b) { return a > b ? a : b; }
 
-/* a == b up to a relative 1e-9 (scaled by max(1, |a|, |b|)): importers accumulate time
-   in their own way */
-#define TIME_EPS 1e-9
-static int time_close(double a, double b) {
-    return abs_d(a - b) <= TIME_EPS * max_d(1.0, max_d(abs_d(a), abs_d(b)));
+/* a and b are the same communication point of steps of size h: within STEP_TOLERANCE h
+   (model.h; importers compute time as k h, as t += h or in integer nanoseconds), or
+   within a few ulps of their magnitude (an h too small to resolve at that time). Tied to
+   h, not to |t|: a relative 1e-9 of t = 1e7 s would accept a point ten 1 ms steps off. */
+static int same_time(double a, double b, double h) {
+    return abs_d(a - b) <= STEP_TOLERANCE * h + 8.0 * DBL_EPSILON * max_d(abs_d(a), abs_d(b));
 }
 
 /* strdup is POSIX, not C99 */
@@ -408,6 +411,7 @@ static int set_start_values(ModelInstance *m) {
     m->stopTimeDefined = fmi2False;
     m->lastSuccessfulTime = 0.0;
     m->inputTime = 0.0;
+    m->stepSize = 0.0;
     return 1;
 }
 
@@ -541,6 +545,7 @@ fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean toleranceDefined, fm
     m->r[0] = startTime;
     m->lastSuccessfulTime = startTime;
     m->inputTime = startTime;
+    m->stepSize = 0.0; /* initialisation mode: no step yet */
     return fmi2OK;
 }
 
@@ -971,6 +976,7 @@ fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *FMUstate) {
     st->stopTimeDefined = m->stopTimeDefined;
     st->lastSuccessfulTime = m->lastSuccessfulTime;
     st->inputTime = m->inputTime;
+    st->stepSize = m->stepSize;
     memcpy(st->r, m->r, sizeof st->r);
 #if N_INTEGER > 0
     memcpy(st->i, m->i, sizeof st->i);
@@ -1035,6 +1041,7 @@ fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate FMUstate) {
     m->stopTimeDefined = st->stopTimeDefined;
     m->lastSuccessfulTime = st->lastSuccessfulTime;
     m->inputTime = st->inputTime;
+    m->stepSize = st->stepSize;
     m->state = st->state;
 
     /* modelData is not part of the state: drop it, and rebuild it from the restored
@@ -1072,10 +1079,11 @@ fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate *FMUstate) {
      "RFMU"  uint32 format version  uint32 N_REAL N_INTEGER N_BOOLEAN N_STRING
      uint32 strlen(MODEL_GUID)  GUID bytes
      int32 state  int32 stopTimeDefined  double startTime stopTime lastSuccessfulTime inputTime
+     stepSize
      double r[N_REAL]  int32 i[N_INTEGER]  int32 b[N_BOOLEAN]
      per string: uint32 length, bytes (no terminator) */
 #define SER_MAGIC "RFMU"
-#define SER_VERSION 1u
+#define SER_VERSION 2u /* 2: stepSize */
 
 typedef struct {
     unsigned char *w;       /* writing: destination (NULL: only count) */
@@ -1133,6 +1141,7 @@ static void write_snapshot(Cursor *cu, const Snapshot *st) {
     put(cu, &st->stopTime, sizeof(double));
     put(cu, &st->lastSuccessfulTime, sizeof(double));
     put(cu, &st->inputTime, sizeof(double));
+    put(cu, &st->stepSize, sizeof(double));
     put(cu, st->r, sizeof st->r);
     (void)k;
 #if N_INTEGER > 0
@@ -1222,6 +1231,7 @@ static int read_snapshot(ModelInstance *m, Cursor *cu, Snapshot *st) {
     get(cu, &st->stopTime, sizeof(double));
     get(cu, &st->lastSuccessfulTime, sizeof(double));
     get(cu, &st->inputTime, sizeof(double));
+    get(cu, &st->stepSize, sizeof(double));
     get(cu, st->r, sizeof st->r);
     (void)k;
 #if N_INTEGER > 0
@@ -1379,18 +1389,17 @@ fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint,
     (void)noSetFMUStatePriorToCurrentPoint; /* states are cheap to keep */
 
     /* Argument errors change nothing: the instance stays in StepComplete. */
-    if (!isfinite(t0) || !time_close(t0, m->r[0])) {
+    if (!(h > 0.0) || !isfinite(h)) {
+        model_error(m, "fmi2DoStep: communicationStepSize %g must be > 0", h);
+        return fmi2Error;
+    }
+    if (!isfinite(t0) || !same_time(t0, m->r[0], h)) {
         model_error(m, "fmi2DoStep: currentCommunicationPoint %.17g differs from the FMU time "
                        "%.17g (steps must follow each other)",
                     t0, m->r[0]);
         return fmi2Error;
     }
-    if (!(h > 0.0) || !isfinite(h)) {
-        model_error(m, "fmi2DoStep: communicationStepSize %g must be > 0", h);
-        return fmi2Error;
-    }
-    if (m->stopTimeDefined &&
-        t0 + h > m->stopTime + TIME_EPS * max_d(1.0, abs_d(m->stopTime))) {
+    if (m->stopTimeDefined && t0 + h > m->stopTime && !same_time(t0 + h, m->stopTime, h)) {
         model_error(m, "fmi2DoStep: step to t = %.17g goes past stopTime %.17g", t0 + h,
                     m->stopTime);
         return fmi2Error;
@@ -1405,6 +1414,7 @@ fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint,
     }
 #endif
     m->r[0] = t0 + h; /* not r[0] += h: no drift from the FMU's own time */
+    m->stepSize = h;
     if (model_outputs(m) != 0) {
         model_error(m, "fmi2DoStep: computing the outputs at t = %.17g failed", m->r[0]);
         m->state = STATE_ERROR;
