@@ -122,7 +122,6 @@ from __future__ import annotations
 import math
 from typing import Any, ClassVar
 
-import control
 import numpy as np
 import scipy.linalg as sla
 from filterpy.kalman import KalmanFilter
@@ -474,6 +473,8 @@ class AlignmentKalmanFilter(Observer):
 
     def observability_rank(self) -> int:
         """Rank of the observability matrix of (F, H) (seed eq. 27); 7 = observable."""
+        import control  # here, not at the top: python-control takes ~2.7 s to import
+
         return int(np.linalg.matrix_rank(control.obsv(self.F, self.H)))
 
     def finish(self) -> dict:
