@@ -58,7 +58,8 @@ def figure(out: Path, fname: str, title: str, x: np.ndarray, x_label: str, axes:
             ax.plot(x[:n], np.asarray(values)[:n], label=label, **({"lw": 0.8} | (style[0] if style else {})))
         if len(curves) > 1:
             ax.legend(fontsize=8, loc="upper right", ncol=legend_columns)
-            ax.set_ylabel(f"[{curves[0][2]}]", fontsize=8)
+            # a sensor channel may be unitless ("-") where the physical signal beside it is not
+            ax.set_ylabel(f"[{next((c[2] for c in curves if c[2] not in ('-', '?')), curves[0][2])}]", fontsize=8)
         else:
             ax.set_ylabel(f"{curves[0][0]} [{curves[0][2]}]", fontsize=8)
         ax.grid(alpha=0.3)
