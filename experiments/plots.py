@@ -24,17 +24,17 @@ def _pyplot():
     return plt
 
 
-def unit_of(signal: str) -> str:
-    """Unit of 'component.variable' from the model definitions (for axis labels)."""
-    from models import all_models
+def units_of(system) -> dict[str, str]:
+    """``{"component.variable": unit}`` of every variable of the system's FMUs (for axis
+    labels), read from their model descriptions: deriving the models would take seconds."""
+    from fmpy import read_model_description
 
-    var = signal.split(".", 1)[1]
-    for model in all_models():
-        try:
-            return model.variable(var).unit or "-"
-        except KeyError:
-            continue
-    return "?"
+    units = {}
+    for c in system.components:
+        for v in read_model_description(str(c.fmu)).modelVariables:
+            unit = v.unit or (v.declaredType.unit if v.declaredType is not None else None)
+            units[f"{c.name}.{v.name}"] = unit or "-"
+    return units
 
 
 def x_axis(signals: dict[str, np.ndarray], position: str | None = None) -> tuple[np.ndarray, str]:
@@ -71,7 +71,7 @@ def figure(out: Path, fname: str, title: str, x: np.ndarray, x_label: str, axes:
     return fname
 
 
-def plot_signals(spec: dict | None, signals: dict[str, np.ndarray], roles: dict, out: Path,
+def plot_signals(spec: dict | None, signals: dict[str, np.ndarray], roles: dict, units: dict[str, str], out: Path,
                  position: str | None = None) -> list[str]:
     """The study's signal figures (``{file: (title, [[(signal or role, label), ...] per axis])}``);
     without them, every recorded signal on its own axis (at most 8)."""
@@ -81,7 +81,7 @@ def plot_signals(spec: dict | None, signals: dict[str, np.ndarray], roles: dict,
     x, x_label = x_axis(signals, position)
     files = []
     for fname, (title, axes) in spec.items():
-        axes_spec = [[(label, signals[sig], unit_of(sig)) for sig, label in
+        axes_spec = [[(label, signals[sig], units.get(sig, "?")) for sig, label in
                       ((roles.get(s, s), label) for s, label in curves) if sig in signals] for curves in axes]
         axes_spec = [a for a in axes_spec if a]
         if axes_spec:
@@ -89,7 +89,7 @@ def plot_signals(spec: dict | None, signals: dict[str, np.ndarray], roles: dict,
     return files
 
 
-def plot_estimates(bank, signals: dict[str, np.ndarray], out: Path) -> list[str]:
+def plot_estimates(bank, signals: dict[str, np.ndarray], units: dict[str, str], out: Path) -> list[str]:
     """One figure per observer: every estimate that has a truth signal, estimate over truth."""
     t, est = bank.arrays()
     files, col = [], 0
@@ -98,7 +98,7 @@ def plot_estimates(bank, signals: dict[str, np.ndarray], out: Path) -> list[str]
         for j, name in enumerate(obs.outputs):
             if name in spec.truth:
                 truth_sig = spec.truth[name]
-                unit = obs.units.get(name, unit_of(truth_sig))
+                unit = obs.units.get(name, units.get(truth_sig, "?"))
                 axes.append([(f"truth {truth_sig}", signals[truth_sig][:len(t)], unit),
                              (f"estimate {spec.name}.{name}", est[:, col + j], unit)])
         col += len(obs.outputs)

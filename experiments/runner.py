@@ -170,11 +170,12 @@ def run_experiment(name: str, variant: str | None = None, out: Path | str | None
         return metrics
     (out / "metrics.json").write_text(json.dumps(metrics, indent=2, default=_json_default) + "\n")
 
-    from .plots import plot_estimates, plot_signals
+    from .plots import plot_estimates, plot_signals, units_of
 
     position = roles.get(exp.study.x_axis) if exp.study.x_axis != "time" else None
-    plots = (plot_signals(exp.study.figures_of_signals, signals, roles, out, position)
-             + plot_estimates(bank, signals, out)
+    units = units_of(system)
+    plots = (plot_signals(exp.study.figures_of_signals, signals, roles, units, out, position)
+             + plot_estimates(bank, signals, units, out)
              + exp.study.figures(RunData(signals, estimates, metrics, roles), out))
     _report(exp, system, metrics, plots, out)
     print(f"wrote {out}/: signals.csv, estimates.csv, metrics.json, report.md, {', '.join(plots)}", file=log)

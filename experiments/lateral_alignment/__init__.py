@@ -19,6 +19,7 @@ after it.
 from __future__ import annotations
 
 import json
+import os
 import time
 from pathlib import Path
 
@@ -163,9 +164,30 @@ def _ours(m: dict, key_j="J_mm", key_r="J_rel") -> list[str]:
     return [_cell(m[key_j][b], m[key_r][b]) for b in BANDS]
 
 
-def report_md(metrics: dict) -> str:
-    from models.vehicle_lateral import first_lateral_mode
+def first_lateral_mode() -> tuple[float, float, str]:
+    """models.vehicle_lateral.first_lateral_mode of the model's own parameters, cached beside
+    the FMUs and keyed by the model sources: it derives the complete vehicle model (sympy,
+    seconds), for one sentence of every report."""
+    from fmus.generate.build import DEFAULT_OUT, sources_key
 
+    cache, key = DEFAULT_OUT / ".first_lateral_mode.json", sources_key()
+    try:
+        cached = json.loads(cache.read_text())
+        if cached["key"] == key:
+            return tuple(cached["mode"])
+    except (OSError, ValueError, KeyError):
+        pass
+    from models.vehicle_lateral import first_lateral_mode as derived
+
+    mode = derived()
+    cache.parent.mkdir(parents=True, exist_ok=True)
+    part = cache.with_name(f"{cache.name}.{os.getpid()}.part")  # study workers write it at once
+    part.write_text(json.dumps({"key": key, "mode": list(mode)}) + "\n")
+    part.replace(cache)
+    return mode
+
+
+def report_md(metrics: dict) -> str:
     L = ["## Alignment estimate: J (mm) / J_rel, band-passed per EN 13848 (seed eq. 32)", "",
          f"Estimate and real alignment are band-passed to each EN 13848 range (zero-phase Butterworth) "
          f"before J and J_rel are taken; scored after the first {metrics['scored_from_s']:g} s (the track's "
