@@ -159,7 +159,8 @@ def main(argv: list[str] | None = None) -> int:
     p.set_defaults(fn=cmd_run)
     p = sub.add_parser("study", help="variants x seeds of an experiment, in parallel (Dask) -> table")
     p.add_argument("experiment")
-    p.add_argument("--variant", action="append", metavar="V", help="run only this variant (repeatable; default all)")
+    p.add_argument("--variant", action="extend", nargs="+", metavar="V",
+                   help="run only these variants (default all)")
     p.add_argument("--runs", type=int, default=1, metavar="N",
                    help="Monte Carlo: N runs per variant with seeds S, S+1, ... (--seed S, default 1)")
     p.add_argument("--keep-runs", action="store_true",

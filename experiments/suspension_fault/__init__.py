@@ -87,7 +87,8 @@ def _fmt(x, scale=1.0, digits=3) -> str:
     return "-" if x is None else f"{x * scale:.{digits}g}"
 
 
-COLUMNS = ("k1 true final [kN/m] | k1 estimate final [kN/m] | rel. error final (raw estimate) | convergence (2 %) [s] | "
+COLUMNS = ("k1 true final [kN/m] | k1 estimate final [kN/m] | rel. error final (raw estimate) | "
+           "convergence (2 %) [s] | "
            "detection delay (5 %) [s]")
 
 
