@@ -30,6 +30,7 @@ test-slow: setup
 bench: build
 	$(BIN)/python benchmarks/step_cost.py
 	$(BIN)/python benchmarks/masters.py
+	$(BIN)/python benchmarks/overhead.py
 
 clean:
 	rm -rf build $(OUT) .pytest_cache

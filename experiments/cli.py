@@ -103,7 +103,8 @@ def cmd_study(args) -> int:
     from .study import run_study
 
     run_study(args.experiment, args.out, scheduler=args.scheduler, master=args.master,
-              workers=args.workers, **_overrides(args))
+              workers=args.workers, variants=args.variant, runs=args.runs, keep_runs=args.keep_runs,
+              **_overrides(args))
     return 0
 
 
@@ -156,11 +157,17 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--master", default="jacobi", help="jacobi (default), gauss-seidel or container")
     _add_overrides(p)
     p.set_defaults(fn=cmd_run)
-    p = sub.add_parser("study", help="every variant of an experiment, in parallel (Dask) -> table")
+    p = sub.add_parser("study", help="variants x seeds of an experiment, in parallel (Dask) -> table")
     p.add_argument("experiment")
+    p.add_argument("--variant", action="extend", nargs="+", metavar="V",
+                   help="run only these variants (default all)")
+    p.add_argument("--runs", type=int, default=1, metavar="N",
+                   help="Monte Carlo: N runs per variant with seeds S, S+1, ... (--seed S, default 1)")
+    p.add_argument("--keep-runs", action="store_true",
+                   help="with --runs N > 1: keep each run's CSVs, plots and report (default: metrics only)")
     p.add_argument("--out", help="output folder (default out/EXP_study)")
     p.add_argument("--scheduler", help="address of a running Dask scheduler (default: a local cluster)")
-    p.add_argument("--workers", type=int, help="local cluster size (default: min(variants, 2))")
+    p.add_argument("--workers", type=int, help="local cluster size (default: min(runs in all, 2))")
     p.add_argument("--master", default="jacobi", help="jacobi (default), gauss-seidel or container")
     _add_overrides(p)
     p.set_defaults(fn=cmd_study)

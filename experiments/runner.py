@@ -1,13 +1,11 @@
 """One experiment run: SSP -> system -> master + recorder + observers -> metrics, plots, report.
 
 An experiment is a folder under ``experiments/`` with ``SystemStructure.ssd`` and
-``variants/*.ssv``; its ``__init__.py`` may add plots (``PLOTS``), a default variant
-(``DEFAULT_VARIANT``), study metrics (``metrics(signals, estimates, base) -> dict``;
-``estimates`` holds the online observers' columns and the offline observers', e.g. a
-smoother's ``smoother.xi``), its own figures (``plots(signals, estimates, out, metrics) ->
-[files]``), a report section (``report_md(metrics) -> str``) and a study table (``table_md(table) -> str``).
-``railfmu run`` also accepts any SSP (a ``.ssp`` archive, an ``.ssd`` file or a folder):
-then every recorded signal is plotted.
+``variants/*.ssv``; its ``__init__.py`` exports ``STUDY``, its
+:class:`experiments.study_protocol.Study` (signal roles, default variant, metrics, figures,
+report section, study table). ``railfmu run`` also accepts any SSP (a ``.ssp`` archive, an
+``.ssd`` file or a folder), which gets the default ``Study()``: every recorded signal plotted,
+every observer's raw error reported.
 """
 
 from __future__ import annotations
@@ -16,13 +14,16 @@ import importlib
 import json
 import math
 import sys
+import time
 from dataclasses import dataclass, field
+from functools import lru_cache
 from pathlib import Path
-from types import ModuleType
 
 import numpy as np
 
 from fmus.errors import UserError
+
+from .study_protocol import RunData, Study
 
 HERE = Path(__file__).resolve().parent
 
@@ -35,18 +36,18 @@ def experiment_names() -> list[str]:
 class Experiment:
     name: str
     path: Path  # folder, .ssd or .ssp
-    module: ModuleType | None = None
+    study: Study = field(default_factory=Study)
     variants: list[str] = field(default_factory=list)
+    packaged: bool = False  # a folder of experiments/ (workers find it by name)
 
     @property
     def default_variant(self) -> str | None:
         # an SSP given by path runs as its SSD says unless a variant is asked for
-        return getattr(self.module, "DEFAULT_VARIANT", None)
+        return self.study.default_variant
 
     @property
     def description(self) -> str:
-        doc = (self.module.__doc__ or "").strip() if self.module else ""
-        return doc.splitlines()[0] if doc else self.name
+        return self.study.description or self.name
 
 
 def find_experiment(name: str) -> Experiment:
@@ -54,11 +55,11 @@ def find_experiment(name: str) -> Experiment:
     from fmus.ssp import list_variants
 
     if name in experiment_names():
-        module = importlib.import_module(f"experiments.{name}")
-        return Experiment(name, HERE / name, module, list_variants(HERE / name))
+        study = importlib.import_module(f"experiments.{name}").STUDY  # the package's protocol
+        return Experiment(name, HERE / name, study, list_variants(HERE / name), packaged=True)
     path = Path(name)
     if path.exists():
-        return Experiment(path.stem, path, None, list_variants(path))
+        return Experiment(path.stem, path, Study(), list_variants(path))
     known = ", ".join(experiment_names())
     raise UserError(f"unknown experiment {name!r}; known: {known} (or give the path of an .ssp/.ssd)")
 
@@ -80,10 +81,7 @@ def load_system(exp: Experiment, variant: str | None, sets: dict | None = None, 
     system = read_system(exp.path, variant=variant, fmu_dirs=[DEFAULT_OUT], overrides=overrides,
                          stop_time=stop_time, step_size=step_size)
     if seed is not None:  # every random source of the system (track profile, sensor noise) takes it
-        from fmpy import read_model_description
-
-        seeded = [c for c in system.components
-                  if any(v.name == "seed" for v in read_model_description(str(c.fmu)).modelVariables)]
+        seeded = [c for c in system.components if "seed" in _variable_names(c.fmu)]
         if not seeded:
             raise UserError(f"--seed: no component of {exp.name} has a 'seed' parameter")
         for c in seeded:
@@ -91,46 +89,66 @@ def load_system(exp: Experiment, variant: str | None, sets: dict | None = None, 
     return system
 
 
+def _variable_names(fmu: Path) -> frozenset[str]:
+    return _variable_names_of(fmu, fmu.stat().st_mtime_ns)
+
+
+@lru_cache(maxsize=64)
+def _variable_names_of(fmu: Path, mtime_ns: int) -> frozenset[str]:
+    """Cached per FMU file and version: a Monte Carlo member does not re-read the description."""
+    from fmpy import read_model_description
+
+    return frozenset(v.name for v in read_model_description(str(fmu)).modelVariables)
+
+
 def run_experiment(name: str, variant: str | None = None, out: Path | str | None = None,
                    master: str = "jacobi", sets: dict | None = None, seed: int | None = None,
                    stop_time: float | None = None, step_size: float | None = None,
-                   progress: bool = True, log=sys.stderr) -> dict:
+                   progress: bool = True, log=sys.stderr, write_files: bool = True) -> dict:
     """Run one variant; writes signals.csv, estimates.csv, metrics.json, plots, report.md into
-    ``out`` and returns the metrics."""
+    ``out`` and returns the metrics. With ``write_files=False`` (a Monte Carlo member) it
+    writes nothing and imports no plotting: the metrics are the result."""
     from fmus.cosim.masters import MASTERS, run
     from fmus.cosim.recorder import CsvRecorder
 
     from .observers import ObserverBank
 
+    t_setup = time.perf_counter()
     if master not in MASTERS:
         raise UserError(f"--master {master!r}: choose one of {', '.join(MASTERS)}")
     exp = find_experiment(name)
     variant = variant or exp.default_variant
     system = load_system(exp, variant, sets, seed, stop_time, step_size)
+    roles = exp.study.bind(system)
     out = Path(out or Path("out") / exp.name / (variant or "default"))
-    out.mkdir(parents=True, exist_ok=True)
+    if write_files:
+        out.mkdir(parents=True, exist_ok=True)
     for w in system.warnings:
         print(f"railfmu: warning: {w}", file=log)
     print(f"running {exp.name}/{variant}: {system.stop_time - system.start_time:g} s at "
-          f"{system.step_size:g} s, {master} master -> {out}", file=log)
+          f"{system.step_size:g} s, {master} master" + (f" -> {out}" if write_files else ""), file=log)
 
-    recorder = CsvRecorder(out / "signals.csv")
-    bank = ObserverBank(system, out / "estimates.csv")
+    recorder = CsvRecorder(out / "signals.csv") if write_files else None
+    bank = ObserverBank(system, out / "estimates.csv" if write_files else None)
+    setup_s = time.perf_counter() - t_setup
     try:
-        result = run(system, master=master, sinks=[recorder, bank], progress=progress)
+        result = run(system, master=master, sinks=[s for s in (recorder, bank) if s is not None], progress=progress)
     except UserError as exc:
+        if recorder is None:
+            raise
         raise UserError(f"{exc} (partial results: {out / 'signals.csv'}, {recorder.rows_written} rows)") from None
     except KeyboardInterrupt:
-        t = recorder.last_time
-        print(f"railfmu: interrupted at t = {t if t is not None else 0:g} s; {out / 'signals.csv'} "
-              f"holds {recorder.rows_written} complete rows", file=log)
+        if recorder is not None:
+            t = recorder.last_time
+            print(f"railfmu: interrupted at t = {t if t is not None else 0:g} s; {out / 'signals.csv'} "
+                  f"holds {recorder.rows_written} complete rows", file=log)
         raise
 
     signals = {c: result.data[:, j] for j, c in enumerate(result.columns)}
     t_est, est = bank.arrays()
     estimates = {"time": t_est, **{c: est[:, j] for j, c in enumerate(bank.columns)}, **bank.offline_estimates()}
     metrics = {
-        "experiment": exp.name, "variant": variant, "master": master,
+        "experiment": exp.name, "variant": variant, "master": master, "seed": seed,
         "start_time_s": system.start_time, "stop_time_s": system.stop_time, "step_size_s": system.step_size,
         "simulated_seconds": system.stop_time - system.start_time,
         "wall_time_s": result.wall_time_s,
@@ -139,18 +157,26 @@ def run_experiment(name: str, variant: str | None = None, out: Path | str | None
         "observer_settings": {o.name: o.settings for o in system.observers},
         "rms": {k: float(np.sqrt(np.mean(v ** 2))) for k, v in signals.items() if k != "time"},
         "observers": bank.metrics(signals),
+        "roles": roles,  # what the study read where (study_protocol.Role)
         "warnings": system.warnings,
         "notes": result.notes,
     }
-    if exp.module is not None and hasattr(exp.module, "metrics"):
-        metrics.update(exp.module.metrics(signals, estimates, metrics))
+    t_study = time.perf_counter()
+    metrics.update(exp.study.metrics(RunData(signals, estimates, metrics, roles)))
+    # where a run's time goes (benchmarks/overhead.py): stepping includes the online observers
+    metrics["timing_s"] = {"setup": setup_s, "stepping": result.wall_time_s,
+                           "study_metrics": time.perf_counter() - t_study}
+    if not write_files:
+        return metrics
     (out / "metrics.json").write_text(json.dumps(metrics, indent=2, default=_json_default) + "\n")
 
-    from .plots import plot_estimates, plot_signals
+    from .plots import plot_estimates, plot_signals, units_of
 
-    plots = plot_signals(exp.module, signals, out) + plot_estimates(system, bank, signals, out)
-    if exp.module is not None and hasattr(exp.module, "plots"):  # the study's own figures
-        plots += exp.module.plots(signals, estimates, out, metrics)
+    position = roles.get(exp.study.x_axis) if exp.study.x_axis != "time" else None
+    units = units_of(system)
+    plots = (plot_signals(exp.study.figures_of_signals, signals, roles, units, out, position)
+             + plot_estimates(bank, signals, units, out)
+             + exp.study.figures(RunData(signals, estimates, metrics, roles), out))
     _report(exp, system, metrics, plots, out)
     print(f"wrote {out}/: signals.csv, estimates.csv, metrics.json, report.md, {', '.join(plots)}", file=log)
     return metrics
@@ -176,19 +202,9 @@ def _report(exp: Experiment, system, metrics: dict, plots: list[str], out: Path)
     L += ["", "| connection | map |", "|---|---|"]
     for c in system.connections:
         L.append(f"| {c} | {'identity' if c.identity else f'{c.factor:g} x + {c.offset:g}'} |")
-    if exp.module is not None and hasattr(exp.module, "report_md"):
-        L += ["", exp.module.report_md(metrics)]
-    for name, m in metrics["observers"].items():
-        heading = (f"## Offline observer `{name}` (run on the whole record after the run, "
-                   f"{m['wall_time_s']:.3f} s)" if m.get("offline") else f"## Observer `{name}`")
-        L += ["", heading, "", "| estimate | rms error | rms truth | relative |", "|---|---|---|---|"]
-        for est, v in m.items():
-            if isinstance(v, dict) and "rms_error" in v:
-                rel = f"{v['rel_error']:.3f}" if v["rel_error"] is not None else "-"
-                L.append(f"| {est} | {v['rms_error']:.4g} | {v['rms_truth']:.4g} | {rel} |")
-        L.append(f"\nErrors after t = {next((v['from_time_s'] for v in m.values() if isinstance(v, dict)), 0):g} s "
-                 + ("(the first 10 % of the run left out, as for the online filters). Written to "
-                    f"estimates_{name}.csv." if m.get("offline") else "(the first 10 % of the run is the filter's transient)."))
+    section = exp.study.report_md(metrics)
+    if section:
+        L += ["", section]
     L += ["", "## Signals (rms)", "", "| signal | rms |", "|---|---|"]
     L += [f"| {k} | {v:.4g} |" for k, v in metrics["rms"].items()]
     if metrics["warnings"] or metrics["notes"]:

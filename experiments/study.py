@@ -1,32 +1,89 @@
-"""``railfmu study``: every variant of an experiment, in parallel through Dask.
+"""``railfmu study``: variants x seeds of an experiment as Dask tasks, and their table.
 
-Each variant is one task (an independent co-simulation in a worker process, since FMUs are
-native libraries with their own state); a local cluster by default, or the scheduler at
-``--scheduler``. Writes ``table.json`` ({variant: metrics}), ``table.md`` and one sub-folder
-per variant.
+Each run is one task (an independent co-simulation in a worker process, since FMUs are native
+libraries with their own state); a local cluster by default, or the scheduler at
+``--scheduler``. One run per variant (``--runs 1``, the default) writes ``table.json``
+(``{variant: metrics}``), the study's ``table.md`` and one sub-folder per variant.
+
+``--runs N`` is the Monte Carlo: each variant runs with seeds S, S+1, ..., S+N-1 (``--seed S``,
+default 1), every seeded component (track profile, sensor noise) taking the run's seed.
+``table.json`` is then ``{variant: {"runs": {seed: metrics}, "summary": {metric: statistics}}}``
+over every numeric metric (nested keys joined with dots) and ``table.md`` shows the summary.
+Members write no files (no CSVs, plots or reports; ``--keep-runs`` keeps them, one
+sub-folder per variant and seed) and pay no per-run fixed cost a worker has already paid:
+imports stay loaded in the worker, the FMUs' up-to-date check derives no model.
 """
 
 from __future__ import annotations
 
 import io
 import json
+import math
 import sys
 import time
 from pathlib import Path
 
+import numpy as np
+
 from fmus.errors import UserError
 
 from .runner import _json_default, find_experiment, run_experiment
+from .study_protocol import STATISTICS
+
+DEFAULT_FIRST_SEED = 1
+# the run's inputs, echoed in its metrics: not summarised
+INPUT_KEYS = {"parameters", "observer_settings", "roles", "seed", "start_time_s", "stop_time_s", "step_size_s",
+              "simulated_seconds"}
 
 
-def _run_variant(name: str, variant: str, out: str, master: str, overrides: dict) -> dict:
-    """Worker task: one variant, output captured (workers have no terminal)."""
+def flatten(metrics: dict, prefix: str = "") -> dict[str, float]:
+    """Every numeric leaf of nested ``metrics`` as ``{"a.b.c": value}`` (booleans, strings and
+    None are not numbers here; non-finite numbers are left out)."""
+    flat: dict[str, float] = {}
+    for key, value in metrics.items():
+        name = f"{prefix}{key}"
+        if isinstance(value, dict):
+            flat.update(flatten(value, f"{name}."))
+        elif isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, (bool, np.bool_)):
+            if math.isfinite(value):
+                flat[name] = float(value)
+    return flat
+
+
+def statistics(values) -> dict[str, float]:
+    """mean; sample standard deviation (N - 1; 0 for one value); rms = sqrt(mean(x^2)); min;
+    p50 and p95 (linear interpolation between order statistics, numpy's default); max."""
+    x = np.asarray(values, dtype=float)
+    return {"mean": float(x.mean()), "std": float(x.std(ddof=1)) if x.size > 1 else 0.0,
+            "rms": float(np.sqrt(np.mean(x ** 2))), "min": float(x.min()),
+            "p50": float(np.percentile(x, 50)), "p95": float(np.percentile(x, 95)), "max": float(x.max())}
+
+
+def summarise(runs: dict) -> dict[str, dict[str, float]]:
+    """``{metric: statistics}`` over the runs (``{seed: metrics}``) of every numeric metric that
+    is not an input of the run (:data:`INPUT_KEYS`); a metric counts the runs that have it."""
+    flat = [flatten({k: v for k, v in m.items() if k not in INPUT_KEYS}) for m in runs.values()]
+    keys = list(dict.fromkeys(k for f in flat for k in f))
+    return {k: statistics([f[k] for f in flat if k in f]) for k in keys}
+
+
+def _run_member(name: str, variant: str, out: str | None, master: str, overrides: dict) -> dict:
+    """Worker task: one run, output captured (workers have no terminal); ``out`` None writes nothing."""
     log = io.StringIO()
-    return run_experiment(name, variant, out, master=master, progress=False, log=log, **overrides)
+    return run_experiment(name, variant, out, master=master, progress=False, log=log,
+                          write_files=out is not None, **overrides)
+
+
+def _eta(elapsed: float, done: int, total: int) -> str:
+    left = elapsed / done * (total - done)
+    return f"~{left:.0f} s left" if done < total else "done"
 
 
 def run_study(name: str, out: Path | str | None = None, scheduler: str | None = None,
-              master: str = "jacobi", workers: int | None = None, log=sys.stderr, **overrides) -> dict:
+              master: str = "jacobi", workers: int | None = None, variants: list[str] | None = None,
+              runs: int = 1, keep_runs: bool = False, seed: int | None = None, log=sys.stderr,
+              **overrides) -> dict:
+    """Run the study; writes table.json and table.md into ``out`` and returns the table."""
     from dask.distributed import Client, LocalCluster, as_completed
 
     from fmus.generate.build import DEFAULT_OUT, build_all
@@ -34,11 +91,28 @@ def run_study(name: str, out: Path | str | None = None, scheduler: str | None = 
     exp = find_experiment(name)
     if not exp.variants:
         raise UserError(f"experiment {exp.name}: no variants to study")
+    unknown = [v for v in variants or [] if v not in exp.variants]
+    if unknown:
+        raise UserError(f"experiment {exp.name}: unknown variant {unknown[0]!r}; known: {', '.join(exp.variants)}")
+    if runs < 1:
+        raise UserError(f"--runs {runs}: must be at least 1")
+    selected = list(dict.fromkeys(variants)) if variants else exp.variants
+    monte_carlo = runs > 1
+    first = seed if seed is not None else DEFAULT_FIRST_SEED
+    seeds = [first + i for i in range(runs)] if monte_carlo else [seed]
     out = Path(out or Path("out") / f"{exp.name}_study")
     out.mkdir(parents=True, exist_ok=True)
     build_all(DEFAULT_OUT)  # once, before workers would race to build the same FMUs
+
+    def member_out(v: str, s: int | None) -> str | None:
+        if not monte_carlo:
+            return str(out / v)
+        return str(out / v / f"seed_{s}") if keep_runs else None
+
     cluster = None
     t0 = time.monotonic()
+    total = len(selected) * len(seeds)
+    target = exp.name if exp.packaged else str(exp.path)
     try:
         if scheduler:
             try:
@@ -46,34 +120,43 @@ def run_study(name: str, out: Path | str | None = None, scheduler: str | None = 
             except (OSError, TimeoutError) as exc:
                 raise UserError(f"--scheduler {scheduler}: cannot connect ({exc})") from None
         else:
-            n = workers or min(len(exp.variants), 2)
-            cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
+            cluster = LocalCluster(n_workers=workers or min(total, 2), threads_per_worker=1, processes=True,
                                    dashboard_address=None, silence_logs=40)
             client = Client(cluster)
-        print(f"study {exp.name}: {len(exp.variants)} variants on {client.scheduler.address}", file=log)
-        futures = {client.submit(_run_variant, str(exp.path if exp.module is None else exp.name), v,
-                                 str(out / v), master, overrides, key=f"{exp.name}-{v}", pure=False): v
-                   for v in exp.variants}
-        table: dict[str, dict] = {}
+        what = f"{len(selected)} variants x {runs} seeds ({seeds[0]}..{seeds[-1]})" if monte_carlo \
+            else f"{len(selected)} variants"
+        print(f"study {exp.name}: {what} on {client.scheduler.address}", file=log)
+        futures = {client.submit(_run_member, target, v, member_out(v, s), master, {**overrides, "seed": s},
+                                 key=f"{exp.name}-{v}-{s}", pure=False): (v, s)
+                   for v in selected for s in seeds}
+        results: dict[tuple[str, int | None], dict] = {}
         for i, fut in enumerate(as_completed(futures), 1):
-            v = futures[fut]
+            v, s = futures[fut]
             try:
-                table[v] = fut.result()
+                results[v, s] = fut.result()
             except UserError as exc:
-                raise UserError(f"variant {v}: {exc}") from None
-            print(f"  [{i}/{len(futures)}] {v} done ({time.monotonic() - t0:.1f} s)", file=log)
+                raise UserError(f"variant {v}{f' seed {s}' if monte_carlo else ''}: {exc}") from None
+            elapsed = time.monotonic() - t0
+            print(f"  [{i}/{total}] {v}{f' seed {s}' if monte_carlo else ''} done ({elapsed:.1f} s, "
+                  f"{_eta(elapsed, i, total)})", file=log)
         client.close()
     finally:
         if cluster is not None:
             cluster.close()
-    table = {v: table[v] for v in exp.variants}
-    (out / "table.json").write_text(json.dumps(table, indent=2, default=_json_default) + "\n")
     md = [f"# Study {exp.name}", "", exp.description, ""]
-    if exp.module is not None and hasattr(exp.module, "table_md"):
-        md.append(exp.module.table_md(table))
+    if monte_carlo:
+        table = {}
+        for v in selected:
+            member_runs = {s: results[v, s] for s in seeds}
+            table[v] = {"runs": member_runs, "summary": summarise(member_runs)}
+        md.append(exp.study.summary_md({v: t["summary"] for v, t in table.items()}, runs))
+        md += ["", "Each run's files are in <variant>/seed_<seed>/." if keep_runs else
+               "Members wrote no files (--keep-runs keeps each run's signals, plots and report)."]
     else:
-        md += ["| variant | wall [s] |", "|---|---|"] + [f"| {v} | {m['wall_time_s']:.2f} |" for v, m in table.items()]
-    md += ["", "Each variant's signals, estimates, plots and report are in its sub-folder."]
+        table = {v: results[v, seeds[0]] for v in selected}
+        md += [exp.study.table_md(table), "",
+               "Each variant's signals, estimates, plots and report are in its sub-folder."]
+    (out / "table.json").write_text(json.dumps(table, indent=2, default=_json_default) + "\n")
     (out / "table.md").write_text("\n".join(md) + "\n")
     print(f"wrote {out}/table.json, table.md ({time.monotonic() - t0:.1f} s)", file=log)
     return table

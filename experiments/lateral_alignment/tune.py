@@ -54,7 +54,7 @@ from estimators.metrics import alignment_errors
 from experiments.runner import find_experiment, load_system
 from fmus.cosim.masters import run
 
-from . import BANDS, SENSOR_COLUMNS, START_UP_S
+from . import BANDS, SENSOR_ROLES, START_UP_S, STUDY
 
 HERE = Path(__file__).resolve().parent
 TRAINING_TRACK = {"seed": 1, "psd_scale": 0.773}  # identify.py's track (1.4 mm over 3-200 m)
@@ -81,8 +81,9 @@ def main(argv: list[str] | None = None) -> int:
                          sets={"track": TRAINING_TRACK, "sensors": {"seed": TRAINING_NOISE_SEED}})
     res = run(system, "container", progress=False)
     col = {c: res.data[:, k] for k, c in enumerate(res.columns)}
-    t, truth = col["time"], col["track.alignment_1"]
-    Z = np.column_stack([col[c] for c in SENSOR_COLUMNS])
+    roles = STUDY.bind(system)  # the signals the SSD feeds the filter and scores it against
+    t, truth = col["time"], col[roles["alignment"]]
+    Z = np.column_stack([col[roles[c]] for c in SENSOR_ROLES])
     settings = dict(next(o.settings for o in system.observers if o.name == "alignment"))
     dt, V = system.step_size, float(settings["V"])
 

@@ -14,11 +14,19 @@ from pathlib import Path
 
 import numpy as np
 
+from experiments.study_protocol import RunData, Study, observers_md, parameter, truth
+
 DEFAULT_VARIANT = "step_fault"
 ESTIMATORS = ("seed_wls", "improved")
 # seed 004 Fig. 3 read qualitatively: both scenarios converge to the true k1; the paper gives
 # no numbers for the error or the delay, so the table shows ours beside its qualitative claim
 SEED_CLAIM = "converges to the true k1 (Fig. 3; no numbers given)"
+
+ROLES = {  # where the SSD holds what the study reads
+    "k1": truth("improved", "k1"),  # the stiffness the fault source sets
+    "k1_before": parameter("fault", "initial_value"), "k1_after": parameter("fault", "final_value"),
+    "fault_time": parameter("fault", "step_time"),
+}
 
 PLOTS = {  # seed 004 Fig. 2 is the step_response variant of this figure
     "coach_response.png": ("Coach and bogie bounce over the rail height under bogie 1 and 2",
@@ -33,73 +41,54 @@ PLOTS = {  # seed 004 Fig. 2 is the step_response variant of this figure
 }
 
 
-def _fault_time(params: dict) -> float | None:
-    fault = params.get("fault", {})
-    if fault.get("final_value", 430e3) != fault.get("initial_value", 430e3):
-        return float(fault.get("step_time", 20.0))
+def _fault_time(roles: dict) -> float | None:
+    """The fault's time when the fault source steps k1 (from the SSP's bindings or the FMU's defaults)."""
+    if float(roles["k1_after"]) != float(roles["k1_before"]):
+        return float(roles["fault_time"])
     return None
 
 
-def metrics(signals: dict, estimates: dict, base: dict) -> dict:
+def metrics(signals: dict, estimates: dict, base: dict, roles: dict) -> dict:
     """``seed_wls`` and ``improved``: k1_true_final, k1_est_final, rel_error_final,
     convergence_time_s, and detection_delay_s when the variant has a fault."""
     from estimators.suspension import suspension_metrics
 
-    fault_time = _fault_time(base["parameters"])
+    fault_time = _fault_time(roles)
     t = np.asarray(estimates["time"])
-    truth = np.asarray(signals["fault.y"])[:len(t)]
-    return {name: suspension_metrics(t, estimates[f"{name}.k1"], truth, fault_time) for name in ESTIMATORS
+    k1_true = np.asarray(signals[roles["k1"]])[:len(t)]
+    return {name: suspension_metrics(t, estimates[f"{name}.k1"], k1_true, fault_time) for name in ESTIMATORS
             if f"{name}.k1" in estimates}
 
 
-def plots(signals: dict, estimates: dict, out: Path, metrics: dict) -> list[str]:
+def plots(signals: dict, estimates: dict, out: Path, metrics: dict, roles: dict) -> list[str]:
     """Seed 004 Fig. 3 (both k1 estimates and the true k1 over time); for ``step_response``
     also Fig. 2 (the first 10 s of the 1 mm step under both bogies)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from experiments.plots import figure
 
     files = []
+    ts = np.asarray(signals["time"])
     if metrics.get("variant") == "step_response":
-        ts = np.asarray(signals["time"])
         n = np.searchsorted(ts, 10.0, side="right")
-        fig, ax = plt.subplots(figsize=(9, 3.6))
-        for sig, label, style in (("track.vertical_left_1", "rail height (both bogies)", "k--"),
-                                  ("coach.z_c", "coach bounce z_c", "C0"), ("coach.z_b2", "bogie 2 bounce z_b2", "C1")):
-            ax.plot(ts[:n], 1e3 * np.asarray(signals[sig])[:n], style, lw=1.2, label=label)
-        ax.set_xlabel("time [s]")
-        ax.set_ylabel("vertical displacement [mm]")
-        ax.set_title("1 mm vertical step under both bogies at t = 1 s (seed 004 Fig. 2)")
-        ax.grid(alpha=0.3)
-        ax.legend(fontsize=8)
-        fig.tight_layout()
-        fig.savefig(out / "step_response.png", dpi=110)
-        plt.close(fig)
-        files.append("step_response.png")
-
-    t = np.asarray(estimates["time"])
-    fig, ax = plt.subplots(figsize=(9, 3.6))
-    ax.plot(signals["time"], np.asarray(signals["fault.y"]) / 1e3, "k", lw=1.5, label="true k1")
-    for name, style in zip(ESTIMATORS, ("C1", "C0")):
-        if f"{name}.k1" in estimates:
-            ax.plot(t, np.asarray(estimates[f"{name}.k1"]) / 1e3, style, lw=1, label=f"{name} estimate")
-    ax.set_xlabel("time [s]")
-    ax.set_ylabel("k1 [kN/m]")
-    ax.set_title("Secondary vertical stiffness: estimates and truth (seed 004 Fig. 3)")
-    ax.grid(alpha=0.3)
-    ax.legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(out / "k1_estimates.png", dpi=110)
-    plt.close(fig)
-    return [*files, "k1_estimates.png"]
+        curves = [(label, 1e3 * np.asarray(signals[sig])[:n], "mm", style) for sig, label, style in
+                  (("track.vertical_left_1", "rail height (both bogies)", {"color": "k", "ls": "--", "lw": 1.2}),
+                   ("coach.z_c", "coach bounce z_c", {"color": "C0", "lw": 1.2}),
+                   ("coach.z_b2", "bogie 2 bounce z_b2", {"color": "C1", "lw": 1.2}))]
+        files.append(figure(out, "step_response.png", "1 mm vertical step under both bogies at t = 1 s "
+                            "(seed 004 Fig. 2)", ts[:n], "time [s]", [curves]))
+    curves = [("true k1", np.asarray(signals[roles["k1"]]) / 1e3, "kN/m", {"color": "k", "lw": 1.5})]
+    curves += [(f"{name} estimate", np.asarray(estimates[f"{name}.k1"]) / 1e3, "kN/m", {"color": c, "lw": 1})
+               for name, c in zip(ESTIMATORS, ("C1", "C0")) if f"{name}.k1" in estimates]
+    files.append(figure(out, "k1_estimates.png", "Secondary vertical stiffness: estimates and truth "
+                        "(seed 004 Fig. 3)", ts, "time [s]", [curves]))
+    return files
 
 
 def _fmt(x, scale=1.0, digits=3) -> str:
     return "-" if x is None else f"{x * scale:.{digits}g}"
 
 
-COLUMNS = ("k1 true final [kN/m] | k1 estimate final [kN/m] | rel. error final | convergence (2 %) [s] | "
+COLUMNS = ("k1 true final [kN/m] | k1 estimate final [kN/m] | rel. error final (raw estimate) | "
+           "convergence (2 %) [s] | "
            "detection delay (5 %) [s]")
 
 
@@ -112,7 +101,7 @@ def _cells(e: dict) -> str:
 def report_md(metrics: dict) -> str:
     L = ["## k1 estimation", "", f"| estimator | {COLUMNS} |", "|---|---|---|---|---|---|"]
     L += [f"| {name} | {_cells(metrics[name])} |" for name in ESTIMATORS if metrics.get(name)]
-    return "\n".join(L)
+    return "\n".join(L + ["", observers_md(metrics)])
 
 
 def table_md(table: dict[str, dict]) -> str:
@@ -125,3 +114,26 @@ def table_md(table: dict[str, dict]) -> str:
           "`static`, detection delay <= 5 s in `step_fault`. `step_response` is seed 004 Fig. 2 "
           "(no estimation target)."]
     return "\n".join(L)
+
+
+class SuspensionFault(Study):
+    """Onat et al. (2016): k1 of an ERRI B176 coach by the seed's KF + WLS and by a joint EKF."""
+    default_variant = DEFAULT_VARIANT
+    roles = ROLES
+    figures_of_signals = PLOTS
+    summary_metrics = ("*.k1_est_final", "*.rel_error_final", "*.convergence_time_s", "*.detection_delay_s")
+
+    def metrics(self, run: RunData) -> dict:
+        return metrics(run.signals, run.estimates, run.base, run.roles)
+
+    def figures(self, run: RunData, out: Path) -> list[str]:
+        return plots(run.signals, run.estimates, out, run.base, run.roles)
+
+    def report_md(self, metrics: dict) -> str:
+        return report_md(metrics)
+
+    def table_md(self, table: dict[str, dict]) -> str:
+        return table_md(table)
+
+
+STUDY = SuspensionFault(__doc__.strip().splitlines()[0])

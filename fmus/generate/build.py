@@ -10,6 +10,7 @@ from __future__ import annotations
 import hashlib
 import html
 import os
+import re
 import shutil
 import subprocess
 import tempfile
@@ -73,19 +74,64 @@ def _guid_of_fmu(path: Path) -> str | None:
         return None
 
 
-def definition_key(model: Model) -> str:
-    """A hash of everything an FMU is generated from: the model definitions (models/, with
-    their data), the generator, the runtime and hand-written C, the compiler flags. Equal
-    keys give equal FMUs, so a build can be skipped without running the generator (sympy
-    takes ~15 s on the full-vehicle model)."""
-    h = hashlib.sha256(repr((model.identifier, CFLAGS, os.environ.get("CC", "gcc"))).encode())
+def sources_key() -> str:
+    """A hash of the bytes of everything an FMU is generated from: the model definitions
+    (models/, with their data and the build list), the generator, the runtime and
+    hand-written C, the FMI headers' fmpy version, the compiler and its flags. Reading bytes
+    takes milliseconds; deriving the models (sympy) takes seconds, so the up-to-date check
+    never derives (a Monte Carlo member pays it on every run)."""
+    import fmpy
+
+    h = hashlib.sha256(repr((CFLAGS, os.environ.get("CC", "gcc"), fmpy.__version__)).encode())
     roots = [FMUS.parent / "models", RUNTIME_DIR, CSRC_DIR]
     files = [f for r in roots for f in sorted(r.rglob("*")) if f.is_file() and "__pycache__" not in f.parts]
     files += [HERE / "codegen.py", HERE / "build.py", FMUS / "units.py"]
     for f in files:
-        h.update(f.as_posix().encode())
+        h.update(f.relative_to(FMUS.parent).as_posix().encode())
         h.update(f.read_bytes())
     return h.hexdigest()
+
+
+def definition_key(model: Model | str) -> str:
+    """The key of one FMU (a model or its identifier): :func:`sources_key` and its name. Equal
+    keys give equal FMUs, so a build can be skipped without running the generator (sympy
+    takes ~15 s on the full-vehicle model)."""
+    identifier = model if isinstance(model, str) else model.identifier
+    return hashlib.sha256(f"{sources_key()} {identifier}".encode()).hexdigest()
+
+
+def _manifest(out_dir: Path) -> Path:
+    return out_dir / ".railfmu-build.key"
+
+
+def _current_from_manifest(out_dir: Path) -> list[Path] | None:
+    """The FMUs of the last full build when nothing they come from has changed since
+    (:func:`sources_key`) and each is still the one built then (its GUID); else None."""
+    manifest = _manifest(out_dir)
+    if not manifest.is_file():
+        return None
+    key, *rows = manifest.read_text().split("\n")
+    if key != sources_key():
+        return None
+    paths = []
+    for row in filter(None, rows):
+        identifier, _, guid = row.partition(" ")
+        target = out_dir / f"{identifier}.fmu"
+        if _guid_in_archive(target) != guid:
+            return None
+        paths.append(target)
+    return paths
+
+
+def _guid_in_archive(path: Path) -> str | None:
+    """The guid attribute of the archive's modelDescription.xml, without parsing the rest."""
+    try:
+        with zipfile.ZipFile(path) as zf:
+            head = zf.read("modelDescription.xml")[:4096].decode("utf-8", "replace")
+    except (OSError, KeyError, zipfile.BadZipFile):
+        return None
+    m = re.search(r'\bguid="([^"]*)"', head)
+    return m.group(1) if m else None
 
 
 def _key_file(target: Path) -> Path:
@@ -156,11 +202,27 @@ def build_fmu(model: Model, out_dir: Path | str = DEFAULT_OUT, force: bool = Fal
 
 def build_all(out_dir: Path | str = DEFAULT_OUT, models: list[Model] | None = None,
               force: bool = False) -> list[Path]:
+    """Build every model (``models``, default the build list ``models.all_models``); when the
+    whole list is asked for and :func:`sources_key` is the one of its last build, returns its
+    FMUs without deriving any model."""
+    out_dir = Path(out_dir)
+    if models is None and not force:
+        current = _current_from_manifest(out_dir)
+        if current is not None:
+            return current
     from models import all_models
 
+    everything = models is None
     models = all_models() if models is None else models
+    key = sources_key()  # before building: an edit during the build must not be recorded as built
     with ThreadPoolExecutor(max_workers=min(4, os.cpu_count() or 1)) as pool:
-        return list(pool.map(lambda m: build_fmu(m, out_dir, force), models))
+        paths = list(pool.map(lambda m: build_fmu(m, out_dir, force), models))
+    if everything:
+        rows = [f"{p.stem} {_guid_in_archive(p)}" for p in paths]
+        tmp = _manifest(out_dir).with_name(f".railfmu-build.{os.getpid()}.part")
+        tmp.write_text("\n".join([key, *rows]) + "\n")
+        tmp.replace(_manifest(out_dir))  # atomic: parallel builders never read half a manifest
+    return paths
 
 
 def validate(path: Path | str) -> list[str]:
