@@ -26,13 +26,18 @@ from fmus.errors import UserError
 
 @dataclass(frozen=True)
 class Role:
-    """Where the SSD holds one thing a study reads. ``kind`` is one of ``input`` (the recorded
-    signal an observer's input is connected to), ``truth`` (the recorded signal an estimate
+    """Where the SSD holds one thing a study reads. ``kind`` is one of ``measurement`` (the
+    recorded signal an observer's measurement is bound to), ``input`` (the recorded signal an
+    observer's known input is bound to), ``truth`` (the recorded signal an estimate
     is scored against), ``setting`` (an observer's setting), ``parameter`` (a component's
     parameter value), ``output`` (a recorded signal ``owner.name``)."""
     kind: str
     owner: str  # observer or component name
     name: str
+
+
+def measurement(observer: str, name: str) -> Role:
+    return Role("measurement", observer, name)
 
 
 def observer_input(observer: str, name: str) -> Role:
@@ -70,11 +75,12 @@ def bind_role(system, role: Role):
     """The signal name (``component.variable``) or value that ``role`` names in ``system``;
     a UserError naming the SSD and the missing element when it is not there."""
     where = str(system.source or system.name)
-    if role.kind in ("input", "truth", "setting"):
+    if role.kind in ("measurement", "input", "truth", "setting"):
         spec = next((o for o in system.observers if o.name == role.owner), None)
         if spec is None:
             raise UserError(f"{where}: the study needs Observer {role.owner!r}, which the SSD does not declare")
-        table = {"input": spec.inputs, "truth": spec.truth, "setting": spec.settings}[role.kind]
+        table = {"measurement": spec.measurements, "input": spec.inputs, "truth": spec.truth,
+                 "setting": spec.settings}[role.kind]
         if role.name not in table:
             raise UserError(f"{where}: Observer {role.owner!r} has no {role.kind.capitalize()} {role.name!r}, "
                             "which the study needs")

@@ -14,7 +14,8 @@ import numpy as np
 import pytest
 
 from experiments.study import flatten, statistics, summarise
-from experiments.study_protocol import STATISTICS, bind_role, observer_input, output, parameter, setting, truth
+from experiments.study_protocol import (STATISTICS, bind_role, measurement, observer_input, output, parameter, setting,
+                                       truth)
 from fmus.errors import UserError
 
 EXPERIMENTS = Path(__file__).resolve().parents[1] / "experiments"
@@ -69,6 +70,7 @@ def test_roles_are_bound_from_the_ssd(fmu_dir):
     assert bind_role(tw, setting("alignment", "V")) == 20.0
     for role, message in ((truth("smoother", "xi"), "Observer 'smoother'"),
                           (observer_input("alignment", "xi"), "no Input 'xi'"),
+                          (measurement("alignment", "xi"), "no Measurement 'xi'"),
                           (parameter("vehicle", "V"), "component 'vehicle'"),
                           (output("wheelset", "no_such"), "'wheelset.no_such'")):
         with pytest.raises(UserError, match=message):

@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-from experiments.study_protocol import RunData, Study, observer_input, observers_md, output, parameter, truth
+from experiments.study_protocol import RunData, Study, measurement, observers_md, output, parameter, truth
 
 HERE = Path(__file__).resolve().parent
 DEFAULT_VARIANT = "standard"
@@ -48,8 +48,8 @@ SEED_TABLE = {
 }
 SENSOR_ROLES = ("ddy", "dpsi", "ddy_f")  # the filter's inputs: the noisy sensor channels the SSD feeds it
 ROLES = {  # where the SSD holds what the study reads
-    "ddy": observer_input("alignment", "ddy"), "dpsi": observer_input("alignment", "dpsi"),
-    "ddy_f": observer_input("alignment", "ddy_f"),
+    "ddy": measurement("alignment", "ddy"), "dpsi": measurement("alignment", "dpsi"),
+    "ddy_f": measurement("alignment", "ddy_f"),
     "alignment": truth("alignment", "xi"),  # the real alignment under the leading wheelset
     "wheelset_y": truth("alignment", "y"),
     "position": output("track", "position"),
