@@ -16,8 +16,10 @@
  *     sub-steps, so every step lands exactly on t + h;
  *   - a model may end the simulation (model_terminate, model.h): fmi2DoStep then returns
  *     fmi2Discard and fmi2GetBooleanStatus(fmi2Terminated) gives fmi2True (FMI 2.0.4, 4.2.3);
- *   - errors are fmi2Error (never fmi2Fatal); the instance stays usable after a refused call that changed nothing (wrong state, bad
- *     argument, bad parameter at fmi2ExitInitializationMode) and goes to state Error when a
+ *   - errors are fmi2Error (never fmi2Fatal); the instance stays usable after a refused
+ *     call that changed nothing (wrong state, bad argument, bad parameter at
+ *     fmi2ExitInitializationMode: the model's own message is the only one logged, so an
+ *     importer that shows the last message shows it) and goes to state Error when a
  *     step failed half-way (non-finite state or output), from where fmi2SetFMUstate or
  *     fmi2Reset bring it back;
  *   - FMU state get/set/serialize (canGetAndSetFMUstate, canSerializeFMUstate).
