@@ -21,7 +21,6 @@ from models.base import Input, Model, Output, Parameter, State
 pytestmark = pytest.mark.skipif(shutil.which("gcc") is None or fmpy.platform != "linux64",
                                 reason="needs gcc on linux64")
 
-t = sp.Symbol("t", real=True)
 k, levels, enabled, label = (sp.Symbol(n, real=True) for n in ("k", "levels", "enabled", "label"))
 u, gear, valid, x = (sp.Symbol(n, real=True) for n in ("u", "gear", "valid", "x"))
 

@@ -7,6 +7,7 @@ from __future__ import annotations
 import shutil
 import subprocess
 import sys
+from pathlib import Path
 
 import fmpy
 import numpy as np
@@ -17,7 +18,7 @@ from fmpy.fmi2 import FMU2Slave, fmi2LastSuccessfulTime, fmi2Terminated
 
 from fmus.cosim.slave import FMUError, Slave
 from fmus.generate.build import validate
-from models.signal_table import EXAMPLE, N_BOOLEAN, N_INTEGER, N_REAL, SIGNAL_TABLE, Table
+from models.signal_table import EXAMPLE, N_BOOLEAN, N_INTEGER, N_REAL, Table
 
 pytestmark = pytest.mark.skipif(shutil.which("gcc") is None or fmpy.platform != "linux64",
                                 reason="needs gcc on linux64")
@@ -121,18 +122,16 @@ def test_accumulated_master_time_still_hits_every_row(slave, axlebox_csv):
     assert np.array_equal(np.array(got).view(np.int64), y[:, 0].view(np.int64))
 
 
-IRREGULAR = (["time", "gnss_x", "speed", "valid", "regime", "note"],
-             [("0.0", "10.0", "0.0", "1", "0", "start"), ("0.7", "12.5", "1.5", "1", "1", "a b"),
-              ("2.0", "11.0", "-3.0", "0", "2", "x"), ("2.05", "11.5", "2.0", "1", "-7", "y"),
-              ("4.0", "20.0", "4.25", "1", "3", "end")])
+# GNSS-like: fixes at irregular times, a valid flag, a driving regime, a text column nobody binds
+GNSS = Path(__file__).parent / "data" / "gnss_replay.csv"
 BINDING = {"column_1": "gnss_x", "column_2": "speed", "boolean_column_2": "valid",
            "integer_column_3": "regime"}
 
 
 @pytest.mark.parametrize("interpolation", [0, 1])
 @pytest.mark.parametrize("offset", [0.0, 100.25])
-def test_linear_and_hold_between_rows_equal_the_python_twin(slave, tmp_path, interpolation, offset):
-    path = write(tmp_path / "gnss.csv", *IRREGULAR)
+def test_linear_and_hold_between_rows_equal_the_python_twin(slave, interpolation, offset):
+    path = GNSS
     twin = Table.read(path, BINDING)
     s = slave({"file": str(path), "interpolation": interpolation, "time_offset": offset, **BINDING},
               start=offset - 0.5)
@@ -155,8 +154,8 @@ def test_linear_and_hold_between_rows_equal_the_python_twin(slave, tmp_path, int
 
 
 @pytest.mark.parametrize("h, last_start", [(0.5, 4.0), (0.3, 3.9)])
-def test_end_of_table_ends_the_simulation_cleanly(slave, tmp_path, h, last_start):
-    path = write(tmp_path / "gnss.csv", *IRREGULAR)
+def test_end_of_table_ends_the_simulation_cleanly(slave, h, last_start):
+    path = GNSS
     s = slave({"file": str(path), "after_end": 1, **BINDING})
     ti = 0.0
     with pytest.raises(FMICallException) as e:
@@ -241,7 +240,7 @@ def test_bad_csv_in_an_ssd_run_is_one_line_and_exit_2(fmu, tmp_path):
     """The whole chain: SSD -> railfmu run -> the FMU's message as the one error line."""
     bad = tmp_path / "gnss.csv"
     bad.write_text(GOOD.replace("3.0,1,3", "3.0,1,3,4"))
-    good = write(tmp_path / "good.csv", *IRREGULAR)
+    good = GNSS
     ssd = tmp_path / "replay" / "SystemStructure.ssd"
     ssd.parent.mkdir()
     ssd.write_text(SSD.format(file=bad))
@@ -306,10 +305,10 @@ SSD = """<?xml version="1.0" encoding="UTF-8"?>
 """
 
 
-def test_saved_state_replays_the_same_rows(slave, tmp_path):
+def test_saved_state_replays_the_same_rows(slave):
     """The table is not part of the FMU state: set state reads it again from the restored
     parameters, and the continuation is the same (the cursor is only a hint)."""
-    path = write(tmp_path / "gnss.csv", *IRREGULAR)
+    path = GNSS
     s = slave({"file": str(path), **BINDING})
     for k in range(10):
         s.doStep(k * 0.1, 0.1)
