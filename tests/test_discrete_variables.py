@@ -177,6 +177,14 @@ def test_terminate_when_ends_the_simulation_at_the_first_communication_point(sla
     assert x_end == pytest.approx(1.12) and DEMO.terminates(t_end, [x_end], {"u": 0.8, "valid": True})
     with pytest.raises(FMICallException):
         s.doStep(t_end, h)  # StepFailed: the master stops here
+    # every type stays readable in StepFailed and after fmi2Terminate
+    want = DEMO.outputs_at(t_end, [x_end], {"u": 0.8, "gear": 1, "valid": True})
+    for state in ("StepFailed", "Terminated"):
+        if state == "Terminated":
+            s.terminate()
+        assert s.getInteger([vr["regime"], vr["levels"]]) == [want["regime"], 3], state
+        assert s.getBoolean([vr["stopped"], vr["valid"]]) == [False, True], state
+        assert s.getString([vr["label"]]) == [b'a "quoted" <name>'], state
 
 
 def test_model_refuses_what_fmi_does_not_allow():
