@@ -165,12 +165,17 @@ def model_description(model: Model, guid: str, source_files: list[str]) -> str:
 
 
 def guid_of(model: Model, sources: dict[str, str]) -> str:
-    """Deterministic GUID: a hash of everything that defines the binary's interface and code."""
+    """Deterministic GUID: a hash of everything the archive holds (interface, code, and the
+    documentation and resources, so a new example table is packed, not skipped as unchanged)."""
     h = hashlib.sha256()
     h.update(model_description(model, "", list(sources)).encode())
     for name in sorted(sources):
         h.update(name.encode())
         h.update(sources[name].encode())
+    h.update(model.documentation.encode())
+    for name in sorted(model.resources):
+        h.update(name.encode())
+        h.update(model.resources[name].read_bytes())
     return "{" + str(uuid.UUID(bytes=h.digest()[:16], version=5)) + "}"
 
 
