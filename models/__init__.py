@@ -11,12 +11,13 @@ def all_models() -> list[Model]:
     """Every model that is built into an FMU, in build order."""
     from .coach_vertical import COACH_VERTICAL
     from .sensors import SENSORS
+    from .signal_table import SIGNAL_TABLE
     from .step_source import STEP_SOURCE
     from .track import TRACK
     from .vehicle_lateral import VEHICLE_LATERAL
     from .wheelset import WHEELSET
 
-    return [TRACK, WHEELSET, COACH_VERTICAL, STEP_SOURCE, SENSORS, VEHICLE_LATERAL]
+    return [TRACK, WHEELSET, COACH_VERTICAL, STEP_SOURCE, SENSORS, VEHICLE_LATERAL, SIGNAL_TABLE]
 
 
 __all__ = ["Input", "Model", "Output", "Parameter", "State", "Variable", "all_models"]

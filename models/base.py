@@ -11,6 +11,12 @@ A :class:`Model` is the single source for
 Models whose code cannot be written as closed-form expressions (the track generator) set
 ``c_sources`` to hand-written C; their variables are still declared here, and a test proves
 the C equals the Python implementation.
+
+Types (FMI 2.0): Real everywhere; Integer and Boolean parameters, inputs and outputs
+(discrete: they change only at communication points); String parameters (a file name, a
+column name), which no expression may use. In expressions an Integer or Boolean is a number
+(true = 1); an Integer output is its expression rounded to the nearest integer (C ``lround``),
+a Boolean output is true where its expression is non-zero (a relation such as ``v < 0.01``).
 """
 
 from __future__ import annotations
@@ -33,6 +39,19 @@ STEP_SIZE = sp.Symbol("h", real=True)
 STEP_TOLERANCE = 1e-2
 
 
+TYPES = frozenset({"Real", "Integer", "Boolean", "String"})
+
+
+def _as_type(type_: str, v) -> float | int | bool:
+    """A value computed as a number, as the FMU delivers it (see the module docstring)."""
+    if type_ == "Integer":
+        v = float(v)
+        return int(np.copysign(np.floor(abs(v) + 0.5), v))  # C lround: halves away from 0
+    if type_ == "Boolean":
+        return bool(v != 0)
+    return float(v)
+
+
 @dataclass
 class Variable:
     """An FMU variable. ``unit`` is an FMI unit name ('' = dimensionless); ``source`` says where
@@ -40,7 +59,7 @@ class Variable:
 
     name: str
     description: str
-    unit: str = ""
+    unit: str = ""  # Real only: FMI 2.0 gives Integer, Boolean and String no unit
     start: float | int | bool | str | None = 0.0
     type: str = "Real"  # Real | Integer | Boolean | String
     source: str = ""
@@ -99,7 +118,11 @@ class Model:
     # (start s, stop s, communication step s) for importers' defaults: seed 000's run,
     # 20 s (400 m at 20 m/s) at 1 kHz
     default_experiment: tuple[float, float, float] = (0.0, 20.0, 1e-3)
+    # the simulation ends at the first communication point where this holds (a sympy relation
+    # of t, states, inputs, parameters): fmi2DoStep returns fmi2Discard, fmi2Terminated is true
+    terminate_when: sp.Expr | None = None
     c_sources: list[Path] = field(default_factory=list)  # hand-written C, if not generated
+    c_constants: dict[str, int] = field(default_factory=dict)  # #defines in model_config.h
     resources: dict[str, Path] = field(default_factory=dict)  # name in resources/ -> file
     documentation: str = ""  # the model's equations, for the FMU's documentation/
 
@@ -113,6 +136,27 @@ class Model:
         for u in self.inputs:
             if u.rate is not None and u.rate not in known:
                 raise ValueError(f"model {self.identifier}: input {u.name} has unknown rate {u.rate}")
+            if u.rate is not None and (u.type, self.variable(u.rate).type) != ("Real", "Real"):
+                raise ValueError(f"model {self.identifier}: input {u.name}: a rate needs two Real inputs")
+        self._check_types()
+
+    def _check_types(self) -> None:
+        """What FMI 2.0 and the generator allow: see the module docstring."""
+        allowed = {Parameter: TYPES, Input: TYPES - {"String"}, State: {"Real"},
+                   Output: TYPES - {"String"}}
+        for v in self.variables:
+            where = f"model {self.identifier}: {type(v).__name__.lower()} {v.name}"
+            if v.type not in allowed[type(v)]:
+                raise ValueError(f"{where}: type {v.type} is not allowed (allowed: {sorted(allowed[type(v)])})")
+            if v.type != "Real" and v.unit:
+                raise ValueError(f"{where}: an {v.type} has no unit in FMI 2.0 (say it in the description)")
+        strings = {p.symbol for p in self.parameters if p.type == "String"}
+        exprs = [s.der for s in self.states] + [o.expr for o in self.outputs] + [self.terminate_when]
+        for e in exprs:
+            used = strings & set(sp.sympify(e).free_symbols) if e is not None else set()
+            if used:
+                raise ValueError(f"model {self.identifier}: String parameter {sorted(map(str, used))[0]} "
+                                 "used in an expression")
 
     @property
     def variables(self) -> list[Variable]:
@@ -135,6 +179,8 @@ class Model:
     def check_parameters(self, params: Mapping[str, float]) -> None:
         """The same range checks the FMU applies when initialisation ends."""
         for p in self.parameters:
+            if p.type not in ("Real", "Integer"):
+                continue
             v = params.get(p.name, p.start)
             if p.min is not None and not v >= p.min:
                 raise ValueError(f"{self.identifier}: parameter {p.name} = {v} is below its minimum {p.min}")
@@ -187,8 +233,16 @@ class Model:
         fn = self._lambdify("outputs", [o.expr for o in self.outputs])
         vals = self._call(fn, t, x, u, p, h)
         out = {s.name: float(xi) for s, xi in zip(self.states, x)}
-        out.update({o.name: float(v) for o, v in zip(self.outputs, vals)})
+        out.update({o.name: _as_type(o.type, v) for o, v in zip(self.outputs, vals)})
         return out
+
+    def terminates(self, t: float, x, u: Mapping[str, float] | None = None,
+                   p: Mapping[str, float] | None = None) -> bool:
+        """Whether ``terminate_when`` holds at one instant (False without one)."""
+        if self.terminate_when is None:
+            return False
+        fn = self._lambdify("terminate", [self.terminate_when])
+        return bool(self._call(fn, t, x, u, p)[0])
 
     def linearize(self, p: Mapping[str, float] | None = None, u0: Mapping[str, float] | None = None):
         """(A, B, C, D) of dx = A x + B du, y = C x + D du about x = 0 and the inputs at their
@@ -200,7 +254,7 @@ class Model:
         f = sp.Matrix(self.derivative_exprs())
         g = sp.Matrix([o.expr for o in self.outputs])
         pv = {**self.default_parameters(), **(p or {})}
-        subs = {q.symbol: pv[q.name] for q in self.parameters}
+        subs = {q.symbol: pv[q.name] for q in self.parameters if q.type != "String"}
         uv = {**{v.name: v.start for v in self.inputs}, **(u0 or {})}
         zero = {**{s: 0 for s in x}, **{v.symbol: uv[v.name] for v in self.inputs}}
 

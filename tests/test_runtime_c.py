@@ -651,3 +651,97 @@ def test_resource_paths(new_slave, fmu_dir, tmp_path):
         assert raw_instantiate(r, resources=location)
         start(r)
         assert get_str(r, DATA_PATH) == expected, location
+
+
+# ---- the model ends the simulation (model_terminate) ----------------------------------
+
+def test_model_ends_the_simulation_with_discard_and_terminated(new_slave):
+    """FMI 2.0.4, 4.2.3: fmi2DoStep returns fmi2Discard, fmi2Terminated is true, the last
+    successful time is where the model stopped, outputs stay readable, no further step."""
+    s = new_slave(logging_on=True)
+    start(s, reals={NAN_TIME: 0.25}, integers={NAN_MODE: 3})
+    s.doStep(0.0, 0.2)
+    assert s.getBooleanStatus(fmi2Terminated) is False
+    expected = s.getFMUstate()
+    with pytest.raises(FMICallException) as e:
+        s.doStep(0.2, 0.2)  # reaches t = 0.4 >= 0.25: the model stops there
+    assert e.value.status == FMI2_STATUS_DISCARD
+    assert s.getBooleanStatus(fmi2Terminated) is True
+    assert s.getRealStatus(fmi2LastSuccessfulTime) == 0.4
+    t, x, v, a = s.getReal([TIME, X, V, A])
+    assert t == 0.4
+    s.setFMUstate(expected)  # the same step without the request computes the same values
+    x_ok, v_ok = s.getReal([X, V])
+    xr, vr, _ = rk4_reference(x_ok, v_ok, 0.2, 0.2, 1e-3, 4.0, 0.4, 0.0, 0.0)
+    assert (x, v) == (xr, vr) and a == -4.0 * x - 0.4 * v
+    with pytest.raises(FMICallException):
+        s.doStep(0.2, 0.2)
+    s.terminate()  # StepFailed -> Terminated is legal
+    assert s.getReal([TIME]) == [0.4]
+    assert any("ended the simulation at t = 0.4" in msg for *_, msg in s.log)
+    assert any("reached nan_time" in msg for _, _, c, msg in s.log if c == "logEvents")
+    assert not s.log.errors()
+
+
+def test_model_ends_inside_the_step_at_its_own_time(new_slave):
+    s = new_slave()
+    start(s, reals={NAN_TIME: 0.3}, integers={NAN_MODE: 4})
+    s.doStep(0.0, 0.2)
+    with pytest.raises(FMICallException) as e:
+        s.doStep(0.2, 0.2)
+    assert e.value.status == FMI2_STATUS_DISCARD
+    assert s.getRealStatus(fmi2LastSuccessfulTime) == 0.3 and s.getReal([TIME]) == [0.3]
+    assert s.getBooleanStatus(fmi2Terminated) is True
+    # further steps are illegal calls (state StepFailed), outputs still readable
+    with pytest.raises(FMICallException) as e:
+        s.doStep(0.3, 0.1)
+    assert e.value.status == FMI2_STATUS_ERROR and "StepFailed" in s.log.errors()[-1]
+
+
+def test_end_requested_at_initialisation_stops_at_the_start(new_slave):
+    s = new_slave()
+    start(s, start_time=1.0, reals={NAN_TIME: 0.5}, integers={NAN_MODE: 3})
+    assert s.getBooleanStatus(fmi2Terminated) is True  # known before the first step
+    x0 = s.getReal([X])
+    with pytest.raises(FMICallException) as e:
+        s.doStep(1.0, 0.1)
+    assert e.value.status == FMI2_STATUS_DISCARD
+    assert s.getRealStatus(fmi2LastSuccessfulTime) == 1.0
+    assert s.getReal([TIME]) == [1.0] and s.getReal([X]) == x0  # nothing computed
+    s.reset()  # a reset forgets the request
+    start(s)
+    assert s.getBooleanStatus(fmi2Terminated) is False
+    s.doStep(0.0, 0.1)
+
+
+def test_the_end_request_is_part_of_the_fmu_state(new_slave):
+    s = new_slave("a")
+    start(s, reals={NAN_TIME: 0.15}, integers={NAN_MODE: 3})
+    s.doStep(0.0, 0.1)
+    before = s.getFMUstate()
+    with pytest.raises(FMICallException):
+        s.doStep(0.1, 0.1)
+    after = s.getFMUstate()
+    blob = s.serializeFMUstate(after)
+    s.setFMUstate(before)  # back to StepComplete, no request
+    assert s.getBooleanStatus(fmi2Terminated) is False
+    s.setFMUstate(after)
+    assert s.getBooleanStatus(fmi2Terminated) is True
+    b = new_slave("b")
+    start(b)
+    restored = b.deSerializeFMUstate(blob)
+    b.setFMUstate(restored)
+    assert b.getBooleanStatus(fmi2Terminated) is True
+    assert b.getRealStatus(fmi2LastSuccessfulTime) == 0.2
+    with pytest.raises(FMICallException):
+        b.doStep(0.2, 0.1)  # StepFailed
+    for st in (before, after):
+        s.freeFMUstate(st)
+    b.freeFMUstate(restored)
+
+
+def test_fmpy_simulate_ends_where_the_model_ends(fmu_dir):
+    res = fmpy.simulate_fmu(str(fmu_dir), stop_time=2.0, output_interval=0.1,
+                            start_values={"nan_mode": 3, "nan_time": 0.95}, output=["x"])
+    assert res["time"][-1] == pytest.approx(1.0) and len(res) == 11
+

@@ -2,7 +2,8 @@
 
 Value references (per FMI type): Real 0 is ``time``; then Real parameters, the internal
 integrator step (models with states), inputs, states, outputs. Integer, Boolean and String
-parameters are numbered from 0 in their own types.
+variables are numbered from 0 in their own types, in the same order (parameters, inputs,
+outputs); Integer and Boolean inputs and outputs are ``discrete``.
 
 For models with expressions, the C equations come from sympy ``ccode`` after common
 subexpression elimination, so the FMU computes exactly what :meth:`Model.rhs` lambdifies.
@@ -11,6 +12,7 @@ subexpression elimination, so the FMU computes exactly what :meth:`Model.rhs` la
 from __future__ import annotations
 
 import hashlib
+import re
 import uuid
 from dataclasses import dataclass
 from xml.sax.saxutils import quoteattr
@@ -63,18 +65,25 @@ def layout(model: Model) -> list[Slot]:
                          "s", model.integrator_step, positive=True, source="numerics")
         slots.append(Slot(step, take("Real"), "parameter", "fixed", "exact"))
     for u in model.inputs:
-        slots.append(Slot(u, take(u.type), "input", "continuous", None))
+        slots.append(Slot(u, take(u.type), "input", _signal_variability(u), None))
     for s in model.states:
         slots.append(Slot(s, take("Real"), "output", "continuous", "exact"))
     for o in model.outputs:
-        slots.append(Slot(o, take(o.type), "output", "continuous", "calculated"))
+        slots.append(Slot(o, take(o.type), "output", _signal_variability(o), "calculated"))
     return slots
 
 
+def _signal_variability(v: Variable) -> str:
+    """FMI 2.0 allows variability="continuous" for Real only."""
+    return "continuous" if v.type == "Real" else "discrete"
+
+
 # -- modelDescription.xml --------------------------------------------------------------------
-def _fmt(x) -> str:
-    if isinstance(x, bool):
+def _fmt(x, type_: str = "Real") -> str:
+    if type_ == "Boolean" or isinstance(x, bool):
         return "true" if x else "false"
+    if type_ == "Integer":
+        return str(int(x))
     if isinstance(x, float):
         return repr(x)
     return str(x)
@@ -135,11 +144,11 @@ def model_description(model: Model, guid: str, source_files: list[str]) -> str:
             ta.append(f'unit="{v.unit}"')
         if t in ("Real", "Integer"):
             if v.min is not None:
-                ta.append(f'min="{_fmt(v.min)}"')
+                ta.append(f'min="{_fmt(v.min, t)}"')
             if v.max is not None:
-                ta.append(f'max="{_fmt(v.max)}"')
+                ta.append(f'max="{_fmt(v.max, t)}"')
         if s.initial != "calculated" and s.causality != "independent":
-            ta.append(f"start={quoteattr(_fmt(v.start))}")
+            ta.append(f"start={quoteattr(_fmt(v.start if v.start is not None else '', t))}")
         L.append(f'    <!-- {i + 1} --><ScalarVariable {attrs}><{t} {" ".join(ta)}/></ScalarVariable>')
     L += ['  </ModelVariables>', '  <ModelStructure>', '    <Outputs>']
     index = {s.var.name: i + 1 for i, s in enumerate(slots)}
@@ -156,12 +165,17 @@ def model_description(model: Model, guid: str, source_files: list[str]) -> str:
 
 
 def guid_of(model: Model, sources: dict[str, str]) -> str:
-    """Deterministic GUID: a hash of everything that defines the binary's interface and code."""
+    """Deterministic GUID: a hash of everything the archive holds (interface, code, and the
+    documentation and resources, so a new example table is packed, not skipped as unchanged)."""
     h = hashlib.sha256()
     h.update(model_description(model, "", list(sources)).encode())
     for name in sorted(sources):
         h.update(name.encode())
         h.update(sources[name].encode())
+    h.update(model.documentation.encode())
+    for name in sorted(model.resources):
+        h.update(name.encode())
+        h.update(model.resources[name].read_bytes())
     return "{" + str(uuid.UUID(bytes=h.digest()[:16], version=5)) + "}"
 
 
@@ -199,6 +213,7 @@ def model_config_h(model: Model, guid: str) -> str:
          f"#define N_REAL {n['Real']}", f"#define N_INTEGER {n['Integer']}",
          f"#define N_BOOLEAN {n['Boolean']}", f"#define N_STRING {n['String']}",
          f"#define N_STATES {len(model.states)}", f"#define VR_INTEGRATOR_STEP {step_vr}"]
+    L += [f"#define {k} {int(v)}" for k, v in model.c_constants.items()]
     for s in slots[1:]:
         L.append(f"#define {_PREFIX[s.var.type]}_{s.var.name} {s.vr}")
     L += ["#endif", ""]
@@ -234,22 +249,28 @@ def _c_name(v: Variable) -> str:
 
 
 def _check_parameters_c(model: Model) -> list[str]:
-    """Range checks of Real parameters, from a table (lower bound, upper bound, strict >)."""
+    """Range checks of Real and Integer parameters, from a table (lower bound, upper bound,
+    strict >)."""
     rows = []
     for p in model.parameters:
-        if p.type == "Real":
+        if p.type in ("Real", "Integer") and (p.type == "Real" or p.positive or p.min is not None
+                                              or p.max is not None):
             lo = 0.0 if p.positive else (-1e308 if p.min is None else float(p.min))
             hi = 1e308 if p.max is None else float(p.max)
-            rows.append(f'        {{VR_{p.name}, "{p.name}", {lo!r}, {hi!r}, {int(p.positive)}}},')
+            rows.append(f'        {{{_PREFIX[p.type]}_{p.name}, {int(p.type == "Integer")}, "{p.name}", '
+                        f'{lo!r}, {hi!r}, {int(p.positive)}}},')
     if not rows:
         return ["int model_check_parameters(ModelInstance *m) {", "    (void)m;", "    return 0;", "}", ""]
+    has_int = any(p.type == "Integer" for p in model.parameters)
+    value = "c[k].integer ? (double)m->i[c[k].vr] : m->r[c[k].vr]" if has_int else "m->r[c[k].vr]"
     return [
         "int model_check_parameters(ModelInstance *m) {",
-        "    static const struct { fmi2ValueReference vr; const char *name; double lo, hi; int strict; } c[] = {",
+        "    static const struct { fmi2ValueReference vr; int integer; const char *name; double lo, hi; "
+        "int strict; } c[] = {",
         *rows,
         "    };",
         "    for (size_t k = 0; k < sizeof c / sizeof c[0]; k++) {",
-        "        const double v = m->r[c[k].vr];",
+        f"        const double v = {value};",
         "        if (!isfinite(v)) {",
         '            model_error(m, "parameter %s = %g is not finite", c[k].name, v);',
         "            return 1;",
@@ -287,6 +308,26 @@ def _assign_block(model: Model, exprs: list[sp.Expr], targets: list[str],
     return L, {s.name for s in used - model_syms}
 
 
+def _output_target(o: Output) -> str:
+    return f"m->{_ARRAY[o.type]}[{_PREFIX[o.type]}_{o.name}]"
+
+
+def _convert_discrete(line: str, model: Model) -> str:
+    """``m->i[VRI_n] = e;`` -> lround(e); ``m->b[VRB_f] = e;`` -> (e) != 0 (module docstring of
+    models.base); ``end_now = e;`` likewise."""
+    head, sep, expr = line.partition(" = ")
+    target = head.strip()
+    if not sep or not expr.endswith(";"):
+        return line
+    expr = expr[:-1]
+    if target.startswith("m->i["):
+        return f"{head} = (fmi2Integer)lround({expr});"
+    if target.startswith("m->b[") or target == "end_now":
+        cast = "" if target == "end_now" else "(fmi2Boolean)"
+        return f"{head} = {cast}(({expr}) != 0);"
+    return line
+
+
 def equations_c(model: Model) -> str:
     """model_* functions for a model defined by expressions."""
     state_index = {s.name: k for k, s in enumerate(model.states)}
@@ -313,11 +354,21 @@ def equations_c(model: Model) -> str:
         L.append("    (void)t;")
     if not model.states:
         L.append("    (void)m; (void)x; (void)dx;")
+    else:  # derivatives that read no state (dx/dt = u), or only t and x
+        if not any(re.search(r"\bx\[", line) for line in body):
+            L.append("    (void)x;")
+        if not any("m->" in line for line in body):
+            L.append("    (void)m;")
     L += body + ["}", ""]
     # outputs at r[0]: after a step the inputs are extrapolated as in the derivatives (the
     # FMU's best knowledge of them there); once new inputs are set, tau = 0
     outs = [model._substitute_held_inputs(sp.sympify(o.expr), TAU) for o in model.outputs]
-    body, free = _assign_block(model, outs, [f"m->r[VR_{o.name}]" for o in model.outputs], source(False))
+    targets = [_output_target(o) for o in model.outputs]
+    if model.terminate_when is not None:
+        outs.append(model._substitute_held_inputs(sp.sympify(model.terminate_when), TAU))
+        targets.append("end_now")
+    body, free = _assign_block(model, outs, targets, source(False))
+    body = [_convert_discrete(line, model) for line in body]
     L.append("int model_outputs(ModelInstance *m) {")
     if "t" in free:
         L.append("    const double t = m->r[0];")
@@ -325,7 +376,13 @@ def equations_c(model: Model) -> str:
         L.append(f"    const double {STEP_SIZE.name} = m->stepSize; /* the step that ended at t */")
     if "v_tau" in free:
         L.append("    const double v_tau = m->r[0] - m->inputTime; /* first-order hold of the inputs */")
-    L += body + ["    return 0;", "}", ""]
+    if model.terminate_when is not None:
+        L.append("    int end_now;")
+    L += body
+    if model.terminate_when is not None:
+        why = _c_string(f"{model.identifier}: {model.terminate_when} holds at t = %.17g")
+        L.append(f"    if (end_now) model_terminate(m, m->r[0], {why}, m->r[0]);")
+    L += ["    return 0;", "}", ""]
     L += ["int model_state_restored(ModelInstance *m) {", "    (void)m;", "    return 0;", "}", "",
           "void model_free(ModelInstance *m) {", "    (void)m;", "}", ""]
     return "\n".join(L)

@@ -14,9 +14,12 @@
  *   - fmi2DoStep integrates the continuous states with classic fixed-step RK4: the
  *     communication step h is split into n = ceil(h / r[VR_INTEGRATOR_STEP] - 1e-9) equal
  *     sub-steps, so every step lands exactly on t + h;
- *   - errors are fmi2Error (never fmi2Fatal, never fmi2Discard from fmi2DoStep); the
- *     instance stays usable after a refused call that changed nothing (wrong state, bad
- *     argument, bad parameter at fmi2ExitInitializationMode) and goes to state Error when a
+ *   - a model may end the simulation (model_terminate, model.h): fmi2DoStep then returns
+ *     fmi2Discard and fmi2GetBooleanStatus(fmi2Terminated) gives fmi2True (FMI 2.0.4, 4.2.3);
+ *   - errors are fmi2Error (never fmi2Fatal); the instance stays usable after a refused
+ *     call that changed nothing (wrong state, bad argument, bad parameter at
+ *     fmi2ExitInitializationMode: the model's own message is the only one logged, so an
+ *     importer that shows the last message shows it) and goes to state Error when a
  *     step failed half-way (non-finite state or output), from where fmi2SetFMUstate or
  *     fmi2Reset bring it back;
  *   - FMU state get/set/serialize (canGetAndSetFMUstate, canSerializeFMUstate).
@@ -80,6 +83,10 @@ typedef struct {
     unsigned logMask;                /* enabled LOG_* categories (errors are always logged) */
     int outputsStale;                /* an input or tunable parameter changed since the outputs
                                         were computed: recompute before the next get */
+    unsigned long errorsLogged;      /* fmi2Error/fmi2Fatal messages passed to the logger: a
+                                        generic message is added only if the model said nothing */
+    int terminateRequested;          /* the model called model_terminate (part of the FMU state) */
+    double terminateTime;            /* ... and reached this time */
 } Instance;
 
 /* A saved FMU state (fmi2GetFMUstate). Everything a continuation depends on: modelData is
@@ -94,6 +101,8 @@ typedef struct {
     double lastSuccessfulTime;
     double inputTime;
     double stepSize;
+    int terminateRequested;
+    double terminateTime;
     fmi2Real r[N_REAL];
 #if N_INTEGER > 0
     fmi2Integer i[N_INTEGER];
@@ -219,7 +228,7 @@ static void vlog(const char *instanceName, const fmi2CallbackFunctions *function
 }
 
 void model_log(ModelInstance *m, fmi2Status status, const char *category, const char *fmt, ...) {
-    const Instance *inst = (const Instance *)m;
+    Instance *inst = (Instance *)m;
     va_list ap;
 
     if (!m) return;
@@ -227,9 +236,25 @@ void model_log(ModelInstance *m, fmi2Status status, const char *category, const 
        category (FMI 2.0.4, 2.1.5: fmi2SetDebugLogging) */
     if (status < fmi2Error) {
         if (!m->loggingOn || !(inst->logMask & category_bit(category))) return;
+    } else {
+        inst->errorsLogged++;
     }
     va_start(ap, fmt);
     vlog(m->instanceName, m->functions, status, category, fmt, ap);
+    va_end(ap);
+}
+
+void model_terminate(ModelInstance *m, double time, const char *fmt, ...) {
+    Instance *inst = (Instance *)m;
+    va_list ap;
+
+    if (!m) return;
+    /* several requests in one step: the earliest time counts */
+    if (!inst->terminateRequested || time < inst->terminateTime) inst->terminateTime = time;
+    inst->terminateRequested = 1;
+    if (!fmt || !m->loggingOn || !(inst->logMask & category_bit("logEvents"))) return;
+    va_start(ap, fmt);
+    vlog(m->instanceName, m->functions, fmi2OK, "logEvents", fmt, ap);
     va_end(ap);
 }
 
@@ -412,6 +437,8 @@ static int set_start_values(ModelInstance *m) {
     m->lastSuccessfulTime = 0.0;
     m->inputTime = 0.0;
     m->stepSize = 0.0;
+    ((Instance *)m)->terminateRequested = 0;
+    ((Instance *)m)->terminateTime = 0.0;
     return 1;
 }
 
@@ -570,6 +597,7 @@ static int outputs_finite(ModelInstance *m, const char *function) {
 }
 
 fmi2Status fmi2ExitInitializationMode(fmi2Component c) {
+    unsigned long errors;
     ENTER("fmi2ExitInitializationMode", MASK_ExitInitializationMode);
 
     /* Every failure here leaves the instance in InitializationMode without model data:
@@ -584,14 +612,19 @@ fmi2Status fmi2ExitInitializationMode(fmi2Component c) {
     }
 #endif
     release_model_data(m); /* a get in initialisation mode may have built it already */
+    inst->terminateRequested = 0; /* a get in initialisation mode may have asked already */
+    errors = inst->errorsLogged;
     if (model_initialize(m) != 0) {
         release_model_data(m);
-        model_error(m, "fmi2ExitInitializationMode: model initialisation failed");
+        /* the model's own message (a bad table line, say) is the one the user needs */
+        if (inst->errorsLogged == errors)
+            model_error(m, "fmi2ExitInitializationMode: model initialisation failed");
         return fmi2Error;
     }
     if (model_outputs(m) != 0) {
         release_model_data(m);
-        model_error(m, "fmi2ExitInitializationMode: computing the initial outputs failed");
+        if (inst->errorsLogged == errors)
+            model_error(m, "fmi2ExitInitializationMode: computing the initial outputs failed");
         return fmi2Error;
     }
     if (!outputs_finite(m, "fmi2ExitInitializationMode")) {
@@ -693,6 +726,7 @@ static void mark_outputs_stale(ModelInstance *m) {
    build it now (fmi2ExitInitializationMode builds it again from the final parameters). */
 static int refresh_outputs(ModelInstance *m, const char *function) {
     Instance *inst = (Instance *)m;
+    const unsigned long errors = inst->errorsLogged;
     if (!inst->outputsStale || !(m->state & (STATE_STEP_COMPLETE | STATE_INITIALIZATION_MODE)))
         return 1;
     if (m->state == STATE_INITIALIZATION_MODE) {
@@ -700,13 +734,14 @@ static int refresh_outputs(ModelInstance *m, const char *function) {
         release_model_data(m);
         if (model_initialize(m) != 0) {
             release_model_data(m);
-            model_error(m, "%s: model initialisation failed", function);
+            if (inst->errorsLogged == errors)
+                model_error(m, "%s: model initialisation failed", function);
             return 0;
         }
     }
     inst->outputsStale = 0;
     if (model_outputs(m) != 0) {
-        model_error(m, "%s: computing the outputs failed", function);
+        if (inst->errorsLogged == errors) model_error(m, "%s: computing the outputs failed", function);
         return 0;
     }
     return 1;
@@ -853,7 +888,27 @@ fmi2Status fmi2SetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t
 #endif
     }
 #if N_INTEGER > 0
-    for (k = 0; k < nvr; k++) m->i[vr[k]] = value[k];
+    {
+        /* apply; a tunable parameter during the run is checked again and undone on failure */
+        int tunableChanged = 0;
+        fmi2Integer *old = (fmi2Integer *)malloc(nvr * sizeof *old);
+        if (!old) {
+            model_error(m, "fmi2SetInteger: out of memory");
+            return fmi2Error;
+        }
+        for (k = 0; k < nvr; k++) {
+            tunableChanged |= m->state == STATE_STEP_COMPLETE &&
+                              tunable_parameter(&model_integer_info[vr[k]]);
+            old[k] = m->i[vr[k]];
+            m->i[vr[k]] = value[k];
+        }
+        if (tunableChanged && model_check_parameters(m) != 0) {
+            for (k = nvr; k-- > 0;) m->i[vr[k]] = old[k]; /* reverse: repeated vrs */
+            free(old);
+            return fmi2Error;
+        }
+        free(old);
+    }
 #endif
     return fmi2OK;
 }
@@ -874,7 +929,26 @@ fmi2Status fmi2SetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t
 #endif
     }
 #if N_BOOLEAN > 0
-    for (k = 0; k < nvr; k++) m->b[vr[k]] = value[k] ? fmi2True : fmi2False;
+    {
+        int tunableChanged = 0;
+        fmi2Boolean *old = (fmi2Boolean *)malloc(nvr * sizeof *old);
+        if (!old) {
+            model_error(m, "fmi2SetBoolean: out of memory");
+            return fmi2Error;
+        }
+        for (k = 0; k < nvr; k++) {
+            tunableChanged |= m->state == STATE_STEP_COMPLETE &&
+                              tunable_parameter(&model_boolean_info[vr[k]]);
+            old[k] = m->b[vr[k]];
+            m->b[vr[k]] = value[k] ? fmi2True : fmi2False;
+        }
+        if (tunableChanged && model_check_parameters(m) != 0) {
+            for (k = nvr; k-- > 0;) m->b[vr[k]] = old[k];
+            free(old);
+            return fmi2Error;
+        }
+        free(old);
+    }
 #endif
     return fmi2OK;
 }
@@ -977,6 +1051,8 @@ fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *FMUstate) {
     st->lastSuccessfulTime = m->lastSuccessfulTime;
     st->inputTime = m->inputTime;
     st->stepSize = m->stepSize;
+    st->terminateRequested = inst->terminateRequested;
+    st->terminateTime = inst->terminateTime;
     memcpy(st->r, m->r, sizeof st->r);
 #if N_INTEGER > 0
     memcpy(st->i, m->i, sizeof st->i);
@@ -1042,6 +1118,8 @@ fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate FMUstate) {
     m->lastSuccessfulTime = st->lastSuccessfulTime;
     m->inputTime = st->inputTime;
     m->stepSize = st->stepSize;
+    inst->terminateRequested = st->terminateRequested;
+    inst->terminateTime = st->terminateTime;
     m->state = st->state;
 
     /* modelData is not part of the state: drop it, and rebuild it from the restored
@@ -1079,11 +1157,11 @@ fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate *FMUstate) {
      "RFMU"  uint32 format version  uint32 N_REAL N_INTEGER N_BOOLEAN N_STRING
      uint32 strlen(MODEL_GUID)  GUID bytes
      int32 state  int32 stopTimeDefined  double startTime stopTime lastSuccessfulTime inputTime
-     stepSize
+     stepSize  int32 terminateRequested  double terminateTime
      double r[N_REAL]  int32 i[N_INTEGER]  int32 b[N_BOOLEAN]
      per string: uint32 length, bytes (no terminator) */
 #define SER_MAGIC "RFMU"
-#define SER_VERSION 2u /* 2: stepSize */
+#define SER_VERSION 2u /* 2: stepSize, the terminate request */
 
 typedef struct {
     unsigned char *w;       /* writing: destination (NULL: only count) */
@@ -1142,6 +1220,8 @@ static void write_snapshot(Cursor *cu, const Snapshot *st) {
     put(cu, &st->lastSuccessfulTime, sizeof(double));
     put(cu, &st->inputTime, sizeof(double));
     put(cu, &st->stepSize, sizeof(double));
+    put_i32(cu, (int32_t)st->terminateRequested);
+    put(cu, &st->terminateTime, sizeof(double));
     put(cu, st->r, sizeof st->r);
     (void)k;
 #if N_INTEGER > 0
@@ -1232,6 +1312,8 @@ static int read_snapshot(ModelInstance *m, Cursor *cu, Snapshot *st) {
     get(cu, &st->lastSuccessfulTime, sizeof(double));
     get(cu, &st->inputTime, sizeof(double));
     get(cu, &st->stepSize, sizeof(double));
+    st->terminateRequested = get_i32(cu) != 0;
+    get(cu, &st->terminateTime, sizeof(double));
     get(cu, st->r, sizeof st->r);
     (void)k;
 #if N_INTEGER > 0
@@ -1381,6 +1463,18 @@ static int integrate(ModelInstance *m, double t0, double h) {
 }
 #endif
 
+/* The model called model_terminate: the step ends at r[0] with fmi2Discard, and
+   fmi2GetBooleanStatus(fmi2Terminated) says why (FMI 2.0.4, 4.2.3). State StepFailed
+   allows exactly what the master needs next: get outputs and status, fmi2Terminate. */
+static fmi2Status end_simulation(ModelInstance *m, const char *function) {
+    m->lastSuccessfulTime = m->r[0];
+    m->state = STATE_STEP_FAILED;
+    model_log(m, fmi2Discard, "logEvents",
+              "%s: the model ended the simulation at t = %.17g (fmi2Discard, terminated)",
+              function, m->r[0]);
+    return fmi2Discard;
+}
+
 fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint,
                       fmi2Real communicationStepSize,
                       fmi2Boolean noSetFMUStatePriorToCurrentPoint) {
@@ -1405,6 +1499,10 @@ fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint,
         return fmi2Error;
     }
 
+    /* the model asked to end before this step (at initialisation, or at a get after a
+       set): nothing is computed, the FMU stays at r[0] */
+    if (inst->terminateRequested) return end_simulation(m, "fmi2DoStep");
+
     /* r[0] stays t0 during the integration (model.h: inputs with first-order hold use
        t - r[0]); a failure below leaves the instance in state Error. */
 #if N_STATES > 0
@@ -1420,11 +1518,17 @@ fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint,
         m->state = STATE_ERROR;
         return fmi2Error;
     }
+    if (inst->terminateRequested) {
+        /* the model reached terminateTime (in [t0, t0 + h]) and computed its outputs there */
+        const double te = inst->terminateTime;
+        m->r[0] = te < t0 ? t0 : (te > t0 + h ? t0 + h : te);
+    }
     if (!outputs_finite(m, "fmi2DoStep")) {
         m->state = STATE_ERROR;
         return fmi2Error;
     }
-    ((Instance *)m)->outputsStale = 0;
+    inst->outputsStale = 0;
+    if (inst->terminateRequested) return end_simulation(m, "fmi2DoStep");
     m->lastSuccessfulTime = m->r[0];
     return fmi2OK;
 }
@@ -1474,7 +1578,9 @@ fmi2Status fmi2GetBooleanStatus(fmi2Component c, const fmi2StatusKind s, fmi2Boo
     ENTER("fmi2GetBooleanStatus", MASK_Status);
     if (null_arg(m, "fmi2GetBooleanStatus", "value", value)) return fmi2Error;
     if (s == fmi2Terminated) {
-        *value = fmi2False; /* the slave never asks to end the simulation */
+        /* true once the model asked to end (model_terminate); fmi2DoStep returned or will
+           return fmi2Discard */
+        *value = inst->terminateRequested ? fmi2True : fmi2False;
         return fmi2OK;
     }
     return unsupported_kind(m, "fmi2GetBooleanStatus", s);

@@ -139,6 +139,22 @@ void model_log(ModelInstance *m, fmi2Status status, const char *category, const 
 #endif
     ;
 #define model_error(m, ...) model_log((m), fmi2Error, "logStatusError", __VA_ARGS__)
+/* End the simulation (FMI 2.0.4, 4.2.3): the model has computed its outputs at `time` and
+   can go no further. Called from model_outputs:
+     - during fmi2DoStep from t0 to t0 + h, with time in [t0, t0 + h] (clamped): the runtime
+       sets r[0] = fmi2LastSuccessfulTime = time and fmi2DoStep returns fmi2Discard. A model
+       with continuous states has integrated them to t0 + h and must pass r[0]; a model
+       without states (a table that ends inside the step) may pass the time it reached;
+     - at initialisation (or a get after a set): the next fmi2DoStep computes nothing and
+       returns fmi2Discard at the current time.
+   From then on fmi2GetBooleanStatus(fmi2Terminated) is fmi2True and the outputs stay
+   readable; a master ends the co-simulation there. `fmt` (printf-style, may be NULL) says
+   why, logged in category logEvents. */
+void model_terminate(ModelInstance *m, double time, const char *fmt, ...)
+#if defined(__GNUC__)
+    __attribute__((format(printf, 3, 4)))
+#endif
+    ;
 /* Resolve a path given by a String parameter: absolute paths as they are, relative ones
    against the resources folder. Returns a malloc'ed string (caller frees) or NULL. */
 char *model_resolve_path(ModelInstance *m, const char *path);

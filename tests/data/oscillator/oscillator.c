@@ -5,7 +5,9 @@
  *   a     = dv/dt at the communication point
  *
  * Test hooks: nan_mode = 1 makes dv/dt NaN from t >= nan_time, nan_mode = 2 makes the output
- * a NaN from t >= nan_time. data_path (calculated parameter) is data_file resolved with
+ * a NaN from t >= nan_time; nan_mode = 3 ends the simulation (model_terminate) at the first
+ * communication point t >= nan_time, nan_mode = 4 at nan_time itself (as a table without
+ * states that ends inside a step would). data_path (calculated parameter) is data_file resolved with
  * model_resolve_path, so the test can check the resource location handling.
  */
 #include <math.h>
@@ -103,6 +105,10 @@ int model_outputs(ModelInstance *m) {
     const double u = m->r[VR_u] + m->r[VR_du] * (m->r[VR_time] - m->inputTime);
     m->r[VR_a] = -m->r[VR_k] * m->r[VR_x] - damping(m) * m->r[VR_v] + u;
     if (m->i[VRI_nan_mode] == 2 && m->r[VR_time] >= m->r[VR_nan_time]) m->r[VR_a] = NAN;
+    if (m->i[VRI_nan_mode] == 3 && m->r[VR_time] >= m->r[VR_nan_time])
+        model_terminate(m, m->r[VR_time], "oscillator: t = %g reached nan_time", m->r[VR_time]);
+    if (m->i[VRI_nan_mode] == 4 && m->r[VR_time] >= m->r[VR_nan_time])
+        model_terminate(m, m->r[VR_nan_time], NULL);
     return 0;
 }
 
