@@ -411,9 +411,7 @@ class AlignmentKalmanFilter(Observer):
 
     def observability_rank(self) -> int:
         """Rank of the observability matrix of (F, H) (seed eq. 27); 7 = observable."""
-        import control  # 2.7 s to import: only when asked
-
-        return int(np.linalg.matrix_rank(control.obsv(self.F, self.H)))
+        return int(np.linalg.matrix_rank(kalman.observability_matrix(self.F, self.H)))
 
     def finish(self) -> dict:
         P = self.covariance

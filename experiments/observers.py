@@ -201,6 +201,7 @@ class ObserverBank:
             f.last_z, f.estimate = None, None
         for f in self.online:
             f.obs.reset(0.0)
+            f.seconds = 0.0
         # the offline observers' columns, kept for after the run
         self._kept = sorted({0, *(i for f in self.offline for i in (*f.iz, *f.iu, *f.iflag))})
         self._record: list[np.ndarray] = []
@@ -215,7 +216,9 @@ class ObserverBank:
         for f in self.online:
             if k % f.stride == 0:
                 Z, U, mask = f.sample(row[None, :])
+                t0 = time.perf_counter()
                 f.estimate = f.obs.step(t, Z[0], None if U is None else U[0], None if mask is None else mask[0])
+                f.seconds += time.perf_counter() - t0
         est = np.concatenate([f.estimate for f in self.online]) if self.online else np.empty(0)
         self.times.append(t)
         self.estimates.append(est)
@@ -272,8 +275,9 @@ class ObserverBank:
         out: dict[str, dict] = {}
         n0 = math.ceil(settle_fraction * len(t))
         col = 0
-        for f in self.online:
-            out[f.spec.name] = self._scores(f, t, est[:, col:col + len(f.obs.outputs)], n0, signals)
+        for f in self.online:  # wall_time_s: in the observer's step calls, summed over the run
+            out[f.spec.name] = {"wall_time_s": f.seconds,
+                                **self._scores(f, t, est[:, col:col + len(f.obs.outputs)], n0, signals)}
             col += len(f.obs.outputs)
         for f in self.offline:
             if f.spec.name in self.results:

@@ -349,3 +349,15 @@ def test_ukf_of_a_linear_system_equals_the_kalman_filter():
 def test_rms():
     assert rms([3.0, -4.0]) == math.sqrt(12.5)
     assert math.isnan(rms([]))
+
+
+def test_observability_matrix_equals_python_control_and_finds_an_unobservable_mode():
+    import control
+
+    rng = np.random.default_rng(4)
+    F, H = rng.normal(size=(5, 5)), rng.normal(size=(2, 5))
+    assert np.allclose(kalman.observability_matrix(F, H), control.obsv(F, H), rtol=1e-13, atol=0)
+    # a double integrator seen through its velocity only: position is unobservable (rank 1 of 2)
+    F2 = np.array([[1.0, 0.1], [0.0, 1.0]])
+    assert np.linalg.matrix_rank(kalman.observability_matrix(F2, np.array([[0.0, 1.0]]))) == 1
+    assert np.linalg.matrix_rank(kalman.observability_matrix(F2, np.array([[1.0, 0.0]]))) == 2

@@ -13,8 +13,10 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
+from estimators.alignment import AlignmentKalmanFilter
 from models.vehicle_lateral import first_lateral_mode
 
 EXP = Path(__file__).resolve().parents[1] / "experiments" / "lateral_alignment"
@@ -46,6 +48,13 @@ def test_reduced_standard_run(tmp_path):
     assert m["J_rel"]["whole"] <= 0.2  # the 400 m study: 0.12
     for f in ("alignment.png", "alignment_bands.png", "sensors.png", "estimates_smoother.csv", "report.md"):
         assert (out / f).is_file(), f
+    # the online filter equals the same filter run offline on the recorded signals.csv
+    filt = AlignmentKalmanFilter(m["step_size_s"], **m["observer_settings"]["alignment"])
+    _, offline = filt.run_csv(out / "signals.csv", {"ddy": "sensors.y_1", "dpsi": "sensors.y_2", "ddy_f": "sensors.y_3"})
+    with open(out / "estimates.csv") as f:
+        header = f.readline().strip().split(",")
+    online = np.loadtxt(out / "estimates.csv", delimiter=",", skiprows=1)[:, header.index("alignment.xi")]
+    assert np.array_equal(offline[:, filt.outputs.index("xi")], online)
     report = (out / "report.md").read_text()
     assert "Identification" in report and "seed 000" in report
     assert "## Offline observer `smoother`" in report and "## Observer `smoother`" not in report
