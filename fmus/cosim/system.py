@@ -192,11 +192,12 @@ def _compiled(fmu: Path, where: str) -> Path:
     try:
         with zipfile.ZipFile(fmu) as z:
             z.extractall(work / "fmu")
+        (work / "build").mkdir()
+        saved = os.dup(1)
         try:
-            import contextlib
-            import io
-
-            with contextlib.redirect_stdout(io.StringIO()):
+            # cmake talks on the process's stdout: keep it off the user's terminal
+            with open(work / "build.log", "wb") as log:
+                os.dup2(log.fileno(), 1)
                 build_platform_binary(work / "fmu", build_dir=work / "build")
         except Exception as exc:  # noqa: BLE001 - cmake, the compiler, a bad build description
             raise UserError(f"{where}: {fmu.name} has no binary for {_platform()} and compiling its "
