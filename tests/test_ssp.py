@@ -483,6 +483,31 @@ def test_written_ssd_for_libcosim(fmu_dir, tmp_path):
     assert float(amp.get("value")) == 1e-3
 
 
+def test_written_ssd_for_omsimulator(fmu_dir, tmp_path):
+    """What OMSimulator 3.0 reads: its org.openmodelica annotation FIRST among the system's
+    annotations (it reads only the first), a fixed-step master with the step; the SSD stays
+    valid against the SSP 1.0 schema, ours stay after it."""
+    from lxml import etree
+
+    from fmus.ssp.xmltools import schema_problems
+
+    s = read_system(EXP, variant="harmonic", fmu_dirs=[fmu_dir], step_size=5e-4)
+    with zipfile.ZipFile(write_ssp(s, tmp_path / "tw.ssp")) as zf:
+        text = zf.read("SystemStructure.ssd")
+    doc = etree.fromstring(text)
+    ns = {"ssd": "http://ssp-standard.org/SSP1/SystemStructureDescription",
+          "ssc": "http://ssp-standard.org/SSP1/SystemStructureCommon",
+          "oms": "https://raw.githubusercontent.com/OpenModelica/OMSimulator/master/schema/oms.xsd"}
+    annotations = doc.findall("ssd:System/ssd:Annotations/ssc:Annotation", ns)
+    assert [a.get("type") for a in annotations] == ["org.openmodelica", "org.railfmu.observers",
+                                                    "org.railfmu.recorder"]
+    (master,) = annotations[0].findall("oms:Annotations/oms:SimulationInformation/oms:FixedStepMaster", ns)
+    assert master.get("description") == "oms-ma" and float(master.get("stepSize")) == 5e-4
+    assert b"<oms:FixedStepMaster" in text  # OMSimulator (pugixml) matches the prefix literally
+    assert schema_problems(doc, "ssd", "SystemStructure.ssd") == []
+    assert read_system(tmp_path / "tw.ssp").step_size == 5e-4
+
+
 def test_validate_ssp(fmu_dir, tmp_path):
     s = read_system(EXP, fmu_dirs=[fmu_dir])
     good = write_ssp(s, tmp_path / "good.ssp")
