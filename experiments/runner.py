@@ -58,7 +58,9 @@ def find_experiment(name: str) -> Experiment:
         return Experiment(name, HERE / name, module, list_variants(HERE / name))
     path = Path(name)
     if path.exists():
-        return Experiment(path.stem, path, None, list_variants(path))
+        # named after what holds the SSD: experiments/x/SystemStructure.ssd is "x", a.ssp is "a"
+        label = path.resolve().parent.name if path.name == "SystemStructure.ssd" else path.stem
+        return Experiment(label or path.stem, path, None, list_variants(path))
     known = ", ".join(experiment_names())
     raise UserError(f"unknown experiment {name!r}; known: {known} (or give the path of an .ssp/.ssd)")
 
@@ -106,20 +108,25 @@ def run_experiment(name: str, variant: str | None = None, out: Path | str | None
         raise UserError(f"--master {master!r}: choose one of {', '.join(MASTERS)}")
     exp = find_experiment(name)
     variant = variant or exp.default_variant
-    system = load_system(exp, variant, sets, seed, stop_time, step_size)
     out = Path(out or Path("out") / exp.name / (variant or "default"))
+    if out.exists() and not out.is_dir():
+        raise UserError(f"--out {out}: a file of that name exists; give a folder")
+    system = load_system(exp, variant, sets, seed, stop_time, step_size)
     out.mkdir(parents=True, exist_ok=True)
     for w in system.warnings:
         print(f"railfmu: warning: {w}", file=log)
-    print(f"running {exp.name}/{variant}: {system.stop_time - system.start_time:g} s at "
-          f"{system.step_size:g} s, {master} master -> {out}", file=log)
+    print(f"running {_what_runs(exp, system, variant)}: {system.stop_time - system.start_time:g} s at "
+          f"{system.step_size:g} s (from {system.step_size_from}), {master} master -> {out}", file=log)
 
-    recorder = CsvRecorder(out / "signals.csv")
+    recorder = CsvRecorder(out / "signals.csv", types=system.signal_types())
     bank = ObserverBank(system, out / "estimates.csv")
     try:
         result = run(system, master=master, sinks=[recorder, bank], progress=progress)
     except UserError as exc:
-        raise UserError(f"{exc} (partial results: {out / 'signals.csv'}, {recorder.rows_written} rows)") from None
+        if recorder.rows_written == 0:  # nothing (or a bare header) written: cite no file
+            raise
+        raise UserError(f"{exc} (partial results: {out / 'signals.csv'}, {recorder.rows_written} rows "
+                        f"up to t = {recorder.last_time:g} s)") from None
     except KeyboardInterrupt:
         t = recorder.last_time
         print(f"railfmu: interrupted at t = {t if t is not None else 0:g} s; {out / 'signals.csv'} "
@@ -129,12 +136,18 @@ def run_experiment(name: str, variant: str | None = None, out: Path | str | None
     signals = {c: result.data[:, j] for j, c in enumerate(result.columns)}
     t_est, est = bank.arrays()
     estimates = {"time": t_est, **{c: est[:, j] for j, c in enumerate(bank.columns)}}
+    if result.early_end:
+        print(f"railfmu: early end: {result.early_end}; {out / 'signals.csv'} holds every row up to "
+              f"t = {result.end_time:g} s", file=log)
+    simulated = result.end_time - system.start_time
     metrics = {
         "experiment": exp.name, "variant": variant, "master": master,
         "start_time_s": system.start_time, "stop_time_s": system.stop_time, "step_size_s": system.step_size,
-        "simulated_seconds": system.stop_time - system.start_time,
+        "step_size_from": system.step_size_from,
+        "end_time_s": result.end_time, "early_end": result.early_end,
+        "simulated_seconds": simulated,
         "wall_time_s": result.wall_time_s,
-        "realtime_factor": (system.stop_time - system.start_time) / result.wall_time_s,
+        "realtime_factor": simulated / result.wall_time_s,
         "parameters": {c.name: c.parameters for c in system.components},
         "observer_settings": {o.name: o.settings for o in system.observers},
         "rms": {k: float(np.sqrt(np.mean(v ** 2))) for k, v in signals.items() if k != "time"},
@@ -156,6 +169,13 @@ def run_experiment(name: str, variant: str | None = None, out: Path | str | None
     return metrics
 
 
+def _what_runs(exp: Experiment, system, variant: str | None) -> str:
+    """``track_wheelset, variant psd`` for an experiment of experiments/; for an SSP given by
+    path its system's name and the path."""
+    what = exp.name if exp.module is not None else f"system {system.name!r} of {exp.path}"
+    return f"{what}, {f'variant {variant}' if variant else 'no variant'}"
+
+
 def _json_default(x):
     if isinstance(x, (np.floating, np.integer)):
         return x.item()
@@ -165,10 +185,15 @@ def _json_default(x):
 
 
 def _report(exp: Experiment, system, metrics: dict, plots: list[str], out: Path) -> None:
-    L = [f"# {exp.name} / {metrics['variant']}", "", exp.description, "",
-         (f"{metrics['simulated_seconds']:g} s at a {system.step_size:g} s communication step, "
-         f"{metrics['master']} master, {metrics['wall_time_s']:.2f} s wall time "
-         f"({metrics['realtime_factor']:.1f}x real time)."), "", "## System", "",
+    L = [f"# {exp.name} / {metrics['variant'] or 'no variant'}", "", exp.description, "",
+         (f"{metrics['simulated_seconds']:g} s at a {system.step_size:g} s communication step "
+          f"(from {system.step_size_from}), "
+          f"{metrics['master']} master, {metrics['wall_time_s']:.2f} s wall time "
+          f"({metrics['realtime_factor']:.1f}x real time)."), ""]
+    if metrics["early_end"]:
+        L += [f"**Early end** at t = {metrics['end_time_s']:g} s of {system.stop_time:g} s: "
+              f"{metrics['early_end']}. Every row up to that time is recorded.", ""]
+    L += ["## System", "",
          "| component | FMU | parameters set |", "|---|---|---|"]
     for c in system.components:
         params = ", ".join(f"{k} = {v}" for k, v in c.parameters.items()) or "(defaults)"
