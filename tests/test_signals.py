@@ -113,3 +113,44 @@ def test_an_fmu_without_binary_is_compiled_from_its_sources(tmp_path):
     res = run(system, "jacobi", progress=False)
     assert res.complete and res.early_end is None and res.end_time == 2.0
     assert math.isclose(col(res, "b.sum")[-1], 4.0)
+
+
+SSD = """<?xml version="1.0" encoding="UTF-8"?>
+<ssd:SystemStructureDescription xmlns:ssd="http://ssp-standard.org/SSP1/SystemStructureDescription"
+    xmlns:ssc="http://ssp-standard.org/SSP1/SystemStructureCommon"
+    xmlns:ssv="http://ssp-standard.org/SSP1/SystemStructureParameterValues" version="1.0" name="one">
+  <ssd:System name="one">
+    <ssd:Elements>
+      <ssd:Component name="s" source="stair.fmu">
+        <ssd:ParameterBindings><ssd:ParameterBinding><ssd:ParameterValues>
+          <ssv:ParameterSet version="1.0" name="p"><ssv:Parameters>
+            <ssv:Parameter name="offset"><ssv:Integer value="5"/></ssv:Parameter>
+            <ssv:Parameter name="enable"><ssv:Boolean value="true"/></ssv:Parameter>
+          </ssv:Parameters></ssv:ParameterSet>
+        </ssd:ParameterValues></ssd:ParameterBinding></ssd:ParameterBindings>
+      </ssd:Component>
+    </ssd:Elements>
+  </ssd:System>
+  <ssd:DefaultExperiment startTime="0" stopTime="4"/>
+</ssd:SystemStructureDescription>
+"""
+
+
+@pytest.mark.parametrize("master", MASTERS)
+def test_integer_and_boolean_inputs_set_from_ssv_and_set(stair, tmp_path, master):
+    from fmus.ssp import read_system
+
+    build_stair(tmp_path)
+    (tmp_path / "SystemStructure.ssd").write_text(SSD)
+    system = read_system(tmp_path)
+    assert system.components[0].parameters == {"offset": 5, "enable": True}
+    assert system.step_size == 0.25  # the FMU's DefaultExperiment
+    res = run(system, master, progress=False)
+    counter = np.floor(res.data[:, 0] + 1e-9)
+    np.testing.assert_array_equal(col(res, "s.sum"), counter + 5)
+    np.testing.assert_array_equal(col(res, "s.gated"), counter % 2)
+    # --set overrides, as text
+    system = read_system(tmp_path, overrides={"s": {"offset": "-2", "enable": "false"}})
+    res = run(system, master, progress=False)
+    np.testing.assert_array_equal(col(res, "s.sum"), np.floor(res.data[:, 0] + 1e-9) - 2)
+    assert (col(res, "s.gated") == 0).all()

@@ -660,7 +660,9 @@ def run(system: System, master: str = "jacobi", sinks: Sequence[Sink] = (), prog
     """Run ``system`` with ``master`` (one of :data:`MASTERS`), feeding ``sinks`` as it goes.
 
     Sinks get ``open(columns)``, then the rows (``write`` per sample from the Python
-    masters, ``write_block`` from the container), then ``close(complete)``. On an error
+    masters, ``write_block`` from the container), then ``close(complete)``. An FMU that ends
+    the simulation (fmi2Discard + fmi2Terminated) ends the run normally at that communication
+    point: ``RunResult.early_end`` says who and when, the sinks close as complete. On an error
     (UserError: a failed FMU call with what the FMU logged, a non-finite sample) or
     Ctrl-C the sinks are closed with ``complete=False`` first, so what they hold stays
     readable, and the exception propagates. FMUs and temporary folders are always freed.
