@@ -154,3 +154,9 @@ def test_integer_and_boolean_inputs_set_from_ssv_and_set(stair, tmp_path, master
     res = run(system, master, progress=False)
     np.testing.assert_array_equal(col(res, "s.sum"), np.floor(res.data[:, 0] + 1e-9) - 2)
     assert (col(res, "s.gated") == 0).all()
+
+
+def test_stair_is_a_valid_fmu(stair):
+    from fmpy.validation import validate_fmu
+
+    assert validate_fmu(str(stair)) == []

@@ -346,7 +346,8 @@ class _Sampler:
             else:
                 runs.append((fmu, v.type, [v.valueReference], [col]))
         self.runs = [(f, f.get[t], (ctypes.c_uint * len(vrs))(*vrs), len(vrs), cols[0] * 8,
-                      None if t == "Real" else ((ctypes.c_int * len(vrs))(), slice(cols[0], cols[-1] + 1)))
+                      None if t == "Real" else ((ctypes.c_int * len(vrs))(), slice(cols[0], cols[-1] + 1),
+                                                t == "Boolean"))
                      for f, t, vrs, cols in runs]
         self.count = 0  # rows sampled
 
@@ -356,8 +357,9 @@ class _Sampler:
             if ints is None:
                 s = get(f.c, vrs, n, addr + off)
             else:
-                s = get(f.c, vrs, n, ints[0])
-                self.data[k, ints[1]] = ints[0]
+                buf, cols, boolean = ints
+                s = get(f.c, vrs, n, buf)
+                self.data[k, cols] = np.not_equal(buf, 0) if boolean else buf  # fmi2True may be any non-zero
             if s > Status.WARNING:
                 raise f.fail(f"reading the recorded signals at t = {t:.9g} s", s)
         self.data[k, 0] = t
