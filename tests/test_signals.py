@@ -160,3 +160,16 @@ def test_stair_is_a_valid_fmu(stair):
     from fmpy.validation import validate_fmu
 
     assert validate_fmu(str(stair)) == []
+
+
+def test_container_without_c_compiler_gives_the_same_rows(stair, monkeypatch):
+    """The ctypes loop that replaces the C driver: same Integer/Boolean rows, same early end."""
+    import fmus.cosim.container as container
+
+    system = pair(stair)
+    jac = run(system, "jacobi", progress=False)
+    monkeypatch.setattr(container, "load_driver", lambda: None)
+    con = run(system, "container", progress=False)
+    assert any("no C compiler" in n for n in con.notes)
+    assert con.early_end == jac.early_end and con.end_time == 9.0
+    np.testing.assert_array_equal(con.data, jac.data)
