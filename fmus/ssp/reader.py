@@ -2,14 +2,16 @@
 
 :func:`read_system` applies what FMPy's own SSP support skips: parameter bindings in the SSD
 (inline and ``.ssv``), ``.ssm`` mappings, ``ssc:LinearTransformation``, unit checks and
-conversions, ``ssd:DefaultExperiment`` and a fixed step size from an annotation. Parameter
+conversions, ``ssd:DefaultExperiment`` and a fixed step size (``--step-size``, else our or the
+OSP annotation, else the smallest DefaultExperiment stepSize of the FMUs). Parameter
 values, lowest priority first:
 
     FMU start values < component-level bindings (document order) < system-level bindings
     (``component.param``) < the variant (``variants/<v>.ssv``) < ``overrides`` (``--set``)
 
 Every problem a user can cause is a one-line :class:`UserError` naming the file (with its
-line), the element and what is wrong. Unknown parameter names are errors even where SSP lets
+line), the element and what is wrong; the system read is checked as every master checks it
+(:func:`fmus.cosim.system.check_system`), so ``railfmu validate`` reports what a run would refuse. Unknown parameter names are errors even where SSP lets
 a tool ignore them: a typo in a study must not pass silently.
 
 Helpers: ``ssp_xml`` (files, XML, schemas), ``ssp_units`` (unit algebra), ``ssp_params``
