@@ -11,8 +11,9 @@ values, lowest priority first:
 
 Every problem a user can cause is a one-line :class:`UserError` naming the file (with its
 line), the element and what is wrong; the system read is checked as every master checks it
-(:func:`fmus.cosim.system.check_system`), so ``railfmu validate`` reports what a run would refuse. Unknown parameter names are errors even where SSP lets
-a tool ignore them: a typo in a study must not pass silently.
+(:func:`fmus.cosim.system.check_system`), so ``railfmu validate`` reports what a run would
+refuse. Unknown parameter names are errors even where SSP lets a tool ignore them: a typo in
+a study must not pass silently.
 
 Helpers: ``ssp_xml`` (files, XML, schemas), ``ssp_units`` (unit algebra), ``ssp_params``
 (parameter sets, mappings, value checks), ``ssp_write`` (the ``.ssp`` writer).
