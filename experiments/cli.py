@@ -118,6 +118,8 @@ def cmd_export(args) -> int:
     out = Path(args.output)
     if out.suffix != ".ssp":
         raise UserError(f"-o {out}: the archive name must end in .ssp")
+    if out.is_dir():
+        raise UserError(f"-o {out}: a folder of that name exists; give a file name")
     write_ssp(system, out)
     print(f"wrote {out} ({exp.name}/{args.variant or exp.default_variant}, "
           f"{len(system.components)} FMUs inside)")
@@ -129,7 +131,9 @@ def _add_overrides(p) -> None:
                    help="override a parameter (repeatable)")
     p.add_argument("--seed", type=int, help="seed of every random source (track, sensor noise)")
     p.add_argument("--stop-time", type=float, help="override the SSD's DefaultExperiment stop time [s]")
-    p.add_argument("--step-size", type=float, help="override the communication step [s]")
+    p.add_argument("--step-size", type=float,
+                   help="the communication step [s] (default: the SSD's step annotation, else the smallest "
+                        "DefaultExperiment stepSize of the FMUs)")
 
 
 class _Parser(argparse.ArgumentParser):

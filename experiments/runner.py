@@ -16,7 +16,6 @@ import math
 import sys
 import time
 from dataclasses import dataclass, field
-from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
@@ -59,7 +58,9 @@ def find_experiment(name: str) -> Experiment:
         return Experiment(name, HERE / name, study, list_variants(HERE / name), packaged=True)
     path = Path(name)
     if path.exists():
-        return Experiment(path.stem, path, Study(), list_variants(path))
+        # named after what holds the SSD: experiments/x/SystemStructure.ssd is "x", a.ssp is "a"
+        label = path.resolve().parent.name if path.name == "SystemStructure.ssd" else path.stem
+        return Experiment(label or path.stem, path, Study(), list_variants(path))
     known = ", ".join(experiment_names())
     raise UserError(f"unknown experiment {name!r}; known: {known} (or give the path of an .ssp/.ssd)")
 
@@ -81,24 +82,12 @@ def load_system(exp: Experiment, variant: str | None, sets: dict | None = None, 
     system = read_system(exp.path, variant=variant, fmu_dirs=[DEFAULT_OUT], overrides=overrides,
                          stop_time=stop_time, step_size=step_size)
     if seed is not None:  # every random source of the system (track profile, sensor noise) takes it
-        seeded = [c for c in system.components if "seed" in _variable_names(c.fmu)]
+        seeded = [c for c in system.components if "seed" in c.variables]
         if not seeded:
             raise UserError(f"--seed: no component of {exp.name} has a 'seed' parameter")
         for c in seeded:
             c.parameters["seed"] = seed
     return system
-
-
-def _variable_names(fmu: Path) -> frozenset[str]:
-    return _variable_names_of(fmu, fmu.stat().st_mtime_ns)
-
-
-@lru_cache(maxsize=64)
-def _variable_names_of(fmu: Path, mtime_ns: int) -> frozenset[str]:
-    """Cached per FMU file and version: a Monte Carlo member does not re-read the description."""
-    from fmpy import read_model_description
-
-    return frozenset(v.name for v in read_model_description(str(fmu)).modelVariables)
 
 
 def run_experiment(name: str, variant: str | None = None, out: Path | str | None = None,
@@ -118,25 +107,29 @@ def run_experiment(name: str, variant: str | None = None, out: Path | str | None
         raise UserError(f"--master {master!r}: choose one of {', '.join(MASTERS)}")
     exp = find_experiment(name)
     variant = variant or exp.default_variant
+    out = Path(out or Path("out") / exp.name / (variant or "default"))
+    if write_files and out.exists() and not out.is_dir():
+        raise UserError(f"--out {out}: a file of that name exists; give a folder")
     system = load_system(exp, variant, sets, seed, stop_time, step_size)
     roles = exp.study.bind(system)
-    out = Path(out or Path("out") / exp.name / (variant or "default"))
     if write_files:
         out.mkdir(parents=True, exist_ok=True)
     for w in system.warnings:
         print(f"railfmu: warning: {w}", file=log)
-    print(f"running {exp.name}/{variant}: {system.stop_time - system.start_time:g} s at "
-          f"{system.step_size:g} s, {master} master" + (f" -> {out}" if write_files else ""), file=log)
+    print(f"running {_what_runs(exp, system, variant)}: {system.stop_time - system.start_time:g} s at "
+          f"{system.step_size:g} s (from {system.step_size_from}), {master} master"
+          + (f" -> {out}" if write_files else ""), file=log)
 
-    recorder = CsvRecorder(out / "signals.csv") if write_files else None
+    recorder = CsvRecorder(out / "signals.csv", types=system.signal_types()) if write_files else None
     bank = ObserverBank(system, out / "estimates.csv" if write_files else None)
     setup_s = time.perf_counter() - t_setup
     try:
         result = run(system, master=master, sinks=[s for s in (recorder, bank) if s is not None], progress=progress)
     except UserError as exc:
-        if recorder is None:
+        if recorder is None or recorder.rows_written == 0:  # nothing (or a bare header) written: cite no file
             raise
-        raise UserError(f"{exc} (partial results: {out / 'signals.csv'}, {recorder.rows_written} rows)") from None
+        raise UserError(f"{exc} (partial results: {out / 'signals.csv'}, {recorder.rows_written} rows "
+                        f"up to t = {recorder.last_time:g} s)") from None
     except KeyboardInterrupt:
         if recorder is not None:
             t = recorder.last_time
@@ -147,12 +140,18 @@ def run_experiment(name: str, variant: str | None = None, out: Path | str | None
     signals = {c: result.data[:, j] for j, c in enumerate(result.columns)}
     t_est, est = bank.arrays()
     estimates = {"time": t_est, **{c: est[:, j] for j, c in enumerate(bank.columns)}, **bank.offline_estimates()}
+    if result.early_end:
+        kept = f"; {out / 'signals.csv'} holds every row up to t = {result.end_time:g} s" if recorder else ""
+        print(f"railfmu: early end: {result.early_end}{kept}", file=log)
+    simulated = result.end_time - system.start_time
     metrics = {
         "experiment": exp.name, "variant": variant, "master": master, "seed": seed,
         "start_time_s": system.start_time, "stop_time_s": system.stop_time, "step_size_s": system.step_size,
-        "simulated_seconds": system.stop_time - system.start_time,
+        "step_size_from": system.step_size_from,
+        "end_time_s": result.end_time, "early_end": result.early_end,
+        "simulated_seconds": simulated,
         "wall_time_s": result.wall_time_s,
-        "realtime_factor": (system.stop_time - system.start_time) / result.wall_time_s,
+        "realtime_factor": simulated / result.wall_time_s,
         "parameters": {c.name: c.parameters for c in system.components},
         "observer_settings": {o.name: o.settings for o in system.observers},
         "rms": {k: float(np.sqrt(np.mean(v ** 2))) for k, v in signals.items() if k != "time"},
@@ -182,6 +181,13 @@ def run_experiment(name: str, variant: str | None = None, out: Path | str | None
     return metrics
 
 
+def _what_runs(exp: Experiment, system, variant: str | None) -> str:
+    """``track_wheelset, variant psd`` for an experiment of experiments/; for an SSP given by
+    path its system's name and the path."""
+    what = exp.name if exp.packaged else f"system {system.name!r} of {exp.path}"
+    return f"{what}, {f'variant {variant}' if variant else 'no variant'}"
+
+
 def _json_default(x):
     if isinstance(x, (np.floating, np.integer)):
         return x.item()
@@ -191,10 +197,15 @@ def _json_default(x):
 
 
 def _report(exp: Experiment, system, metrics: dict, plots: list[str], out: Path) -> None:
-    L = [f"# {exp.name} / {metrics['variant']}", "", exp.description, "",
-         (f"{metrics['simulated_seconds']:g} s at a {system.step_size:g} s communication step, "
-         f"{metrics['master']} master, {metrics['wall_time_s']:.2f} s wall time "
-         f"({metrics['realtime_factor']:.1f}x real time)."), "", "## System", "",
+    L = [f"# {exp.name} / {metrics['variant'] or 'no variant'}", "", exp.description, "",
+         (f"{metrics['simulated_seconds']:g} s at a {system.step_size:g} s communication step "
+          f"(from {system.step_size_from}), "
+          f"{metrics['master']} master, {metrics['wall_time_s']:.2f} s wall time "
+          f"({metrics['realtime_factor']:.1f}x real time)."), ""]
+    if metrics["early_end"]:
+        L += [f"**Early end** at t = {metrics['end_time_s']:g} s of {system.stop_time:g} s: "
+              f"{metrics['early_end']}. Every row up to that time is recorded.", ""]
+    L += ["## System", "",
          "| component | FMU | parameters set |", "|---|---|---|"]
     for c in system.components:
         params = ", ".join(f"{k} = {v}" for k, v in c.parameters.items()) or "(defaults)"

@@ -28,7 +28,6 @@ import numpy as np
 from fmus.errors import UserError
 
 from .runner import _json_default, find_experiment, run_experiment
-from .study_protocol import STATISTICS
 
 DEFAULT_FIRST_SEED = 1
 # the run's inputs, echoed in its metrics: not summarised

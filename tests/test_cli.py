@@ -188,3 +188,103 @@ def test_an_interrupted_run_keeps_complete_rows_and_says_so(tmp_path):
     assert all(len(r) == len(header) for r in body)
     assert float(body[-1][0]) == pytest.approx(float(m.group(1)))
     assert "Traceback" not in stderr
+
+
+# -- the test FMU stair (tests/data/stair/): Integer/Boolean signals, an early end --------------
+
+STAIR_SSD = """<?xml version="1.0" encoding="UTF-8"?>
+<ssd:SystemStructureDescription xmlns:ssd="http://ssp-standard.org/SSP1/SystemStructureDescription"
+    xmlns:ssc="http://ssp-standard.org/SSP1/SystemStructureCommon" version="1.0" name="stairs">
+  <ssd:System name="stairs">
+    <ssd:Elements>
+      <ssd:Component name="a" source="stair.fmu"/>
+      <ssd:Component name="b" source="stair.fmu"/>
+    </ssd:Elements>
+    <ssd:Connections>
+      <ssd:Connection startElement="a" startConnector="counter" endElement="b" endConnector="offset"/>
+      <ssd:Connection startElement="a" startConnector="odd" endElement="b" endConnector="enable"/>
+      {extra}
+    </ssd:Connections>
+  </ssd:System>
+  <ssd:DefaultExperiment startTime="0" stopTime="12"/>
+</ssd:SystemStructureDescription>
+"""
+
+
+def _stair_ssp(tmp_path, extra: str = "") -> Path:
+    from stair_fmu import build_stair
+
+    exp = tmp_path / "stairs"
+    exp.mkdir()
+    build_stair(exp)
+    (exp / "SystemStructure.ssd").write_text(STAIR_SSD.format(extra=extra))
+    return exp / "SystemStructure.ssd"
+
+
+@pytest.mark.parametrize("master", ["jacobi", "container"])
+def test_an_fmu_that_ends_the_simulation_ends_the_run_cleanly(tmp_path, master):
+    """stair stops at 9 s (fmi2Discard + fmi2Terminated), 3 s before the SSD's stop time; no
+    step-size annotation: the FMUs' DefaultExperiment stepSize (0.25 s)."""
+    ssd = _stair_ssp(tmp_path)
+    out = tmp_path / "run"
+    res = railfmu("run", str(ssd), "--master", master, "--out", str(out), "--set", "b.stop_time=100")
+    assert res.returncode == 0, res.stderr
+    assert f"running system 'stairs' of {ssd}, no variant: 12 s at 0.25 s (from the smallest " \
+           "DefaultExperiment stepSize of the FMUs (a: stair.fmu, 0.25 s))" in res.stderr
+    assert "early end: stair.fmu (a) ended the simulation at t = 9 s" in res.stderr
+    rows = list(csv.reader(open(out / "signals.csv")))
+    assert rows[0] == ["time", "a.level", "a.counter", "a.sum", "a.odd", "a.gated", "a.y",
+                       "b.level", "b.counter", "b.sum", "b.odd", "b.gated", "b.y"]
+    assert len(rows) - 1 == 37 and rows[-1][0] == "9.0"
+    assert rows[1 + 12][:6] == ["3.0", "3.0", "3", "3", "1", "0"]  # t = 3 s; Integer, Boolean 0/1
+    assert rows[1 + 12][8:11] == ["3", "6", "1"]  # b.counter, b.sum = counter + a.counter, b.odd
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert metrics["end_time_s"] == 9.0 and metrics["simulated_seconds"] == 9.0
+    assert metrics["early_end"].startswith("stair.fmu (a) ended the simulation at t = 9 s")
+    assert metrics["step_size_s"] == 0.25 and "DefaultExperiment" in metrics["step_size_from"]
+    assert "**Early end** at t = 9 s of 12 s" in (out / "report.md").read_text()
+
+
+def test_validate_reports_a_real_to_integer_connection(tmp_path):
+    ssd = _stair_ssp(tmp_path, '<ssd:Connection startElement="a" startConnector="level" endElement="b" '
+                               'endConnector="sum"/>')
+    res = railfmu("validate", str(ssd.parent))
+    assert res.returncode == 1
+    assert "a.level -> b.sum" in res.stdout  # sum is an output
+    ssd.write_text(STAIR_SSD.format(extra='<ssd:Connection startElement="a" startConnector="level" '
+                                          'endElement="b" endConnector="u"/>').replace(
+        'endConnector="offset"', 'endConnector="u"'))
+    res = railfmu("validate", str(ssd.parent))
+    assert res.returncode == 1
+    assert "Connection a.counter -> b.u: type mismatch: Integer -> Real" in res.stdout
+
+
+def test_fmi2_error_in_a_run_names_component_and_status_and_cites_no_unwritten_file(tmp_path):
+    ssd = _stair_ssp(tmp_path)
+    out = tmp_path / "run"
+    res = railfmu("run", str(ssd), "--master", "container", "--out", str(out), "--set", "b.error_time=2")
+    _assert_one_line_error(res, "stair.fmu (b): fmi2DoStep at t = 2 s failed: fmi2Error")
+    assert "partial results: " in res.stderr and "9 rows up to t = 2 s" in res.stderr
+    # a refusal before the first row: no file to cite
+    res = railfmu("run", "track_wheelset", "--set", "track.psd_level=7", "--out", str(out))
+    _assert_one_line_error(res, "psd_level = 7")
+    assert "partial results" not in res.stderr
+
+
+def test_out_naming_a_file_is_one_line(tmp_path):
+    f = tmp_path / "taken"
+    f.write_text("")
+    _assert_one_line_error(railfmu("run", "track_wheelset", "--out", str(f)), f"--out {f}: a file")
+
+
+def test_an_fmu_without_binary_or_sources_is_one_line(tmp_path):
+    import zipfile
+
+    ssd = _stair_ssp(tmp_path)
+    fmu = ssd.parent / "stair.fmu"
+    with zipfile.ZipFile(fmu) as z:
+        md = z.read("modelDescription.xml")
+    with zipfile.ZipFile(fmu, "w") as z:
+        z.writestr("modelDescription.xml", md)
+    res = railfmu("run", str(ssd), "--out", str(tmp_path / "run"))
+    _assert_one_line_error(res, "stair.fmu has no binary for this platform (linux64) and no sources/")

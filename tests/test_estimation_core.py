@@ -323,7 +323,7 @@ def test_unscented_transform_does_not_depend_on_where_the_state_lies():
 
 
 def test_ukf_of_a_linear_system_equals_the_kalman_filter():
-    n, m = 5, 2
+    n = 5
     pts = ukf.MerweScaledSigmaPoints(n, alpha=1e-3, beta=2.0, kappa=-2.0)
     x, P = _running_resistance_moments()
     F = np.eye(n)

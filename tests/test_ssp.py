@@ -7,6 +7,7 @@ Every SSD below uses the two real FMUs (built by the session fixture ``fmu_dir``
 from __future__ import annotations
 
 import dataclasses
+import re
 import shutil
 import zipfile
 from pathlib import Path
@@ -314,6 +315,16 @@ def test_recorder_and_observers(fmu_dir, tmp_path):
         read_system, tmp_path, fmu_dirs=[fmu_dir])
 
 
+def _without_default_step(fmu: Path, out: Path) -> None:
+    """A copy of ``fmu`` whose DefaultExperiment has no stepSize."""
+    with zipfile.ZipFile(fmu) as src, zipfile.ZipFile(out, "w") as dst:
+        for item in src.infolist():
+            data = src.read(item)
+            if item.filename == "modelDescription.xml":
+                data = re.sub(rb' stepSize="[^"]*"', b"", data)
+            dst.writestr(item, data)
+
+
 def test_time(fmu_dir, tmp_path):
     write_ssd(tmp_path, stop="2", step="0.01")
     s = read_system(tmp_path, fmu_dirs=[fmu_dir])
@@ -329,8 +340,19 @@ def test_time(fmu_dir, tmp_path):
     (tmp_path / "SystemStructure.ssd").write_text(text)
     assert read_system(tmp_path, fmu_dirs=[fmu_dir]).step_size == 0.25
     write_ssd(tmp_path, step="")
-    assert "no step size" in user_error(read_system, tmp_path, fmu_dirs=[fmu_dir])
+    # no annotation: the smallest DefaultExperiment stepSize of the FMUs (both say 1 ms)
+    s = read_system(tmp_path, fmu_dirs=[fmu_dir])
+    assert s.step_size == 0.001 and "smallest DefaultExperiment stepSize" in s.step_size_from
+    s = read_system(tmp_path, fmu_dirs=[fmu_dir], step_size=0.1)
+    assert s.step_size == 0.1 and s.step_size_from == "--step-size"
+    # ... and none there either: one line
+    (tmp_path / "resources").mkdir()
+    for name in ("TrackIrregularity.fmu", "WheelsetLateral.fmu"):
+        _without_default_step(fmu_dir / name, tmp_path / "resources" / name)
+    msg = user_error(read_system, tmp_path, fmu_dirs=[fmu_dir])
+    assert msg.startswith(f"{tmp_path / 'SystemStructure.ssd'}: no step size: ") and "--step-size" in msg
     assert read_system(tmp_path, fmu_dirs=[fmu_dir], step_size=0.1).step_size == 0.1
+    shutil.rmtree(tmp_path / "resources")
     write_ssd(tmp_path, stop="")
     assert "no stop time" in user_error(read_system, tmp_path, fmu_dirs=[fmu_dir])
     write_ssd(tmp_path, stop="1", step="0.3")
@@ -462,6 +484,31 @@ def test_written_ssd_for_libcosim(fmu_dir, tmp_path):
     assert len(track.findall("ssd:ParameterBindings/ssd:ParameterBinding", ns)) == 1
     amp = track.find(".//ssv:Parameter[@name='harmonic_lateral_amplitude']/ssv:Real", ns)
     assert float(amp.get("value")) == 1e-3
+
+
+def test_written_ssd_for_omsimulator(fmu_dir, tmp_path):
+    """What OMSimulator 3.0 reads: its org.openmodelica annotation FIRST among the system's
+    annotations (it reads only the first), a fixed-step master with the step; the SSD stays
+    valid against the SSP 1.0 schema, ours stay after it."""
+    from lxml import etree
+
+    from fmus.ssp.xmltools import schema_problems
+
+    s = read_system(EXP, variant="harmonic", fmu_dirs=[fmu_dir], step_size=5e-4)
+    with zipfile.ZipFile(write_ssp(s, tmp_path / "tw.ssp")) as zf:
+        text = zf.read("SystemStructure.ssd")
+    doc = etree.fromstring(text)
+    ns = {"ssd": "http://ssp-standard.org/SSP1/SystemStructureDescription",
+          "ssc": "http://ssp-standard.org/SSP1/SystemStructureCommon",
+          "oms": "https://raw.githubusercontent.com/OpenModelica/OMSimulator/master/schema/oms.xsd"}
+    annotations = doc.findall("ssd:System/ssd:Annotations/ssc:Annotation", ns)
+    assert [a.get("type") for a in annotations] == ["org.openmodelica", "org.railfmu.observers",
+                                                    "org.railfmu.recorder"]
+    (master,) = annotations[0].findall("oms:Annotations/oms:SimulationInformation/oms:FixedStepMaster", ns)
+    assert master.get("description") == "oms-ma" and float(master.get("stepSize")) == 5e-4
+    assert b"<oms:FixedStepMaster" in text  # OMSimulator (pugixml) matches the prefix literally
+    assert schema_problems(doc, "ssd", "SystemStructure.ssd") == []
+    assert read_system(tmp_path / "tw.ssp").step_size == 5e-4
 
 
 def test_validate_ssp(fmu_dir, tmp_path):

@@ -4,11 +4,12 @@ FMPy's container is a Rust binary that loads the components' FMUs and couples th
 driven by a JSON configuration; :func:`build_container` writes it from a :class:`System`:
 
 * every component, with its FMU extracted into the container's ``resources/<stem>/``;
-* every connection (all must be identity maps: the container copies values unchanged);
+* every connection (all must be identity maps: the container copies values unchanged), Real,
+  Integer or Boolean;
 * every parameter value of ``Component.parameters`` as a container parameter
   ``component.name`` with that start value (Real, Integer, Boolean and String), which the
   container sets on the component right after instantiating it;
-* every recorded signal as a container output ``component.variable``.
+* every recorded signal as a container output ``component.variable`` of its own type.
 
 What the container does (FMPy 0.3.32; the same order as our Jacobi master, so their
 samples can be compared one to one): ``fmi2ExitInitializationMode`` copies every
@@ -20,8 +21,10 @@ included. The C driver passes the container's own clock (read back from value re
 after every step) as the next communication point; on the test systems its time values and
 every sample equal the Jacobi master's (``start + k h``) bit for bit.
 
-Pitfalls of fmpy 0.3.32 handled here: a connection's ``variableType`` must be ``Float64``
-(FMPy copies the FMI 2 type ``Real`` from the connector and the binary rejects it); the
+Pitfalls of fmpy 0.3.32 handled here: a connection's ``variableType`` must be ``Float64`` or
+``Int32`` (FMPy copies the FMI 2 type ``Real``/``Integer`` from the connector and the binary
+rejects it); the container implements no ``fmi2GetBooleanStatus`` and returns one status for
+all its components (the master replays a failed step to name the inner FMU); the
 independent ``time`` must be the first model variable (value reference 0) and stay out of
 ``variableMappings``; start values must be strings in ``container.json``.
 
@@ -65,7 +68,7 @@ from fmpy.model_description import (
 
 from ..errors import UserError
 from .slave import Slave
-from .system import System, recorded_signals
+from .system import System, check_system, recorded_signals
 
 DRIVER_SOURCE = Path(__file__).parent.parent / "native" / "runtime" / "container_driver.c"
 
@@ -92,7 +95,10 @@ def _literal(var: ModelVariable, value, where: str) -> str:
 
 
 def check_containable(system: System) -> None:
-    """UserError for what the container cannot run (before anything is built)."""
+    """UserError for what the container cannot run (before anything is built): besides
+    :func:`fmus.cosim.system.check_system`, maps other than the identity and two FMU files
+    of one name."""
+    check_system(system)
     for c in system.connections:
         if not c.identity:
             raise UserError(f"connection {c} maps dst = {c.factor!r} * src + {c.offset!r}: FMPy's "
@@ -126,27 +132,11 @@ def configuration(system: System) -> Configuration:
     """The ``fmpy.container_fmu`` configuration of ``system`` (UserError for what the
     container cannot run or what names nothing)."""
     check_containable(system)
-    components: dict[str, CComponent] = {}
-    variables: dict[str, dict[str, ModelVariable]] = {}
-    for comp in system.components:
-        if comp.name in components:
-            raise UserError(f"component {comp.name!r} appears twice")
-        if not Path(comp.fmu).is_file():
-            raise UserError(f"{comp.fmu}: FMU not found (run `railfmu build`)")
-        md = read_model_description(str(comp.fmu))
-        if md.fmiVersion != "2.0" or md.coSimulation is None:
-            raise UserError(f"{comp.fmu}: the container path runs FMI 2.0 co-simulation FMUs only")
-        components[comp.name] = CComponent(name=comp.name, filename=Path(comp.fmu).resolve(),
-                                           modelDescription=md)
-        variables[comp.name] = {v.name: v for v in md.modelVariables}
+    components = {comp.name: CComponent(name=comp.name, filename=Path(comp.fmu).resolve(),
+                                        modelDescription=comp.md) for comp in system.components}
 
     def var(comp: str, name: str) -> ModelVariable:
-        if comp not in variables:
-            raise UserError(f"unknown component {comp!r}")
-        try:
-            return variables[comp][name]
-        except KeyError:
-            raise UserError(f"{Path(components[comp].filename).name} ({comp}): no variable {name!r}") from None
+        return system.component(comp).variable(name)
 
     mappings: dict[ModelVariable, list] = {}
     by_name: dict[str, ModelVariable] = {}
@@ -159,30 +149,27 @@ def configuration(system: System) -> Configuration:
                                description=inner.description)
             mappings[cv] = [(components[comp.name], inner)]
             by_name[cv.name] = cv
-    for signal in recorded_signals(system, variables):
-        comp, name = signal.split(".", 1)
-        inner = var(comp, name)
-        if inner.type != "Real":
-            raise UserError(f"recorded signal {signal} is {inner.type}: only Real signals can be recorded")
+    for signal in recorded_signals(system):
+        comp, inner = system.signal(signal)
         if signal in by_name:  # a recorded parameter: read through the parameter's variable
             continue
-        cv = ModelVariable(name=signal, type="Real", causality="output", variability="continuous",
+        cv = ModelVariable(name=signal, type=inner.type, causality="output",
+                           variability="continuous" if inner.type == "Real" else "discrete",
                            initial="calculated", description=inner.description)
-        mappings[cv] = [(components[comp], inner)]
+        mappings[cv] = [(components[comp.name], inner)]
         by_name[signal] = cv
 
     connections = []
     for c in system.connections:
         src, dst = var(c.src, c.src_var), var(c.dst, c.dst_var)
-        if src.type != "Real" or dst.type != "Real":
-            raise UserError(f"connection {c}: only Real connections are supported ({src.type} -> {dst.type})")
-        src64 = copy.copy(src)
-        src64.type = "Float64"  # fmpy writes the connector's type; the binary wants Float64
-        connections.append(CConnection(components[c.src], [src64], components[c.dst], [dst]))
+        typed = copy.copy(src)
+        # fmpy writes the connector's FMI 2 type; the binary wants its own names
+        typed.type = {"Real": "Float64", "Integer": "Int32"}.get(src.type, src.type)
+        connections.append(CConnection(components[c.src], [typed], components[c.dst], [dst]))
 
     token = str(uuid.uuid5(uuid.NAMESPACE_URL, "railfmu-container:" + json.dumps({
         "name": system.name, "step": system.step_size,
-        "components": [(c.name, str(Path(c.fmu).resolve()), components[c.name].modelDescription.guid)
+        "components": [(c.name, str(Path(c.fmu).resolve()), c.md.guid)
                        for c in system.components],
         "connections": [str(c) for c in system.connections],
         "variables": [(v.name, v.type, v.start) for v in mappings],
@@ -360,10 +347,9 @@ def load_driver():
         _driver = False
         return None
     fn = dll.railfmu_run_steps
-    fn.argtypes = [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p, ctypes.POINTER(ctypes.c_double),
+    fn.argtypes = [ctypes.c_void_p, ctypes.c_void_p, ctypes.POINTER(ctypes.c_double),
                    ctypes.c_double, ctypes.c_double, ctypes.c_long, ctypes.c_long, ctypes.c_void_p,
-                   ctypes.c_size_t, ctypes.c_void_p, ctypes.c_size_t, ctypes.POINTER(ctypes.c_long),
-                   ctypes.POINTER(ctypes.c_int)]
+                   ctypes.c_size_t, ctypes.POINTER(ctypes.c_long), ctypes.POINTER(ctypes.c_int)]
     fn.restype = ctypes.c_int
     fn._keep = dll
     _driver = fn

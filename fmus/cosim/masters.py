@@ -36,10 +36,20 @@ and is overwritten by the t_k+1 value for the others before their FMU steps; it 
 trajectory, only makes the sample consistent. The row at t_0 is taken after the initial
 copy (all FMUs in their initial state, out of Initialization Mode).
 
-The Python masters call the FMUs' ``fmi2GetReal``/``fmi2SetReal``/``fmi2DoStep`` through
-ctypes with prebuilt arrays (FMPy's wrappers build ctypes arrays on every call), and each
-sample lands straight in the preallocated result array. FMU errors keep the wording of
-:class:`fmus.cosim.slave.Slave` (``X.fmu (name): what failed: <what the FMU logged>``).
+Signals are Real, Integer or Boolean (a connection joins two of the same type; the rows hold
+Integer values and Boolean 0/1 as numbers). The Python masters call the FMUs'
+``fmi2Get*``/``fmi2Set*``/``fmi2DoStep`` through ctypes with prebuilt arrays (FMPy's wrappers
+build ctypes arrays on every call), and each Real sample lands straight in the preallocated
+result array.
+
+FMI 2.0 status semantics, in every master: ``fmi2Discard`` from ``fmi2DoStep`` followed by
+``fmi2GetBooleanStatus(fmi2Terminated) = true`` ends the run normally at that communication
+point (``RunResult.early_end``; every row up to it is there and the sinks close as
+complete); any other ``fmi2Discard``, ``fmi2Error`` or ``fmi2Fatal`` is an error naming the
+component and the status (``X.fmu (name): what failed: <what the FMU logged, or the status>``,
+the wording of :class:`fmus.cosim.slave.Slave`). The container reports one status for all
+its components, so on either the run up to that step is replayed with the Jacobi master
+(same samples, bit for bit) to name the inner component.
 """
 
 from __future__ import annotations
@@ -52,13 +62,12 @@ import sys
 import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
 
 from ..errors import UserError
-from .slave import Slave
-from .system import Connection, Sink, System, recorded_signals
+from .slave import Slave, Status
+from .system import Connection, Sink, System, check_system, recorded_signals
 
 MASTERS = ("jacobi", "gauss-seidel", "container")
 BLOCK_ROWS = 1000  # container path: rows per C call / per write_block
@@ -71,23 +80,24 @@ _c_double_p = ctypes.POINTER(ctypes.c_double)
 @dataclass
 class RunResult:
     columns: list[str]  # "time", then "component.variable" recorded
-    data: np.ndarray  # (n_samples, len(columns)); the rows sampled so far
-    complete: bool  # reached stop_time
+    data: np.ndarray  # (n_samples, len(columns)); the rows sampled (all of them when complete)
+    complete: bool  # ended normally: at stop_time, or earlier when an FMU ended it (early_end)
     wall_time_s: float
     master: str
     notes: list[str] = field(default_factory=list)
+    end_time: float | None = None  # the last row's time
+    early_end: str | None = None  # "X.fmu (name) ended the simulation at t = ... s (...)"
+    step_size: float | None = None
+    step_size_from: str | None = None  # where the step size came from (System.step_size_from)
 
 
-# -- checks shared by every master -----------------------------------------------------------
+class _Terminated(Exception):
+    """fmi2DoStep from ``t`` returned fmi2Discard and the FMU says it terminated."""
 
-def _n_steps(system: System) -> int:
-    start, stop, h = system.start_time, system.stop_time, system.step_size
-    if not (math.isfinite(start) and math.isfinite(stop) and math.isfinite(h)) or h <= 0:
-        raise UserError(f"step size {h} s does not divide the interval [{start}, {stop}] s")
-    n = round((stop - start) / h)
-    if n < 1 or not math.isclose(start + n * h, stop, rel_tol=1e-9, abs_tol=1e-12):
-        raise UserError(f"step size {h} s does not divide the interval [{start}, {stop}] s")
-    return n
+    def __init__(self, slave: Slave, t: float):
+        super().__init__(f"{slave.path.name} ({slave.name}) ended the simulation at t = {t:.9g} s "
+                         "(fmi2DoStep returned fmi2Discard, fmi2Terminated = true)")
+        self.t = t
 
 
 def _check_names(system: System) -> None:
@@ -229,6 +239,9 @@ def gauss_seidel_order(system: System, model_descriptions: Mapping) -> tuple[lis
 
 # -- the Python masters ----------------------------------------------------------------------
 
+_C_TYPES = {"Real": ctypes.c_double, "Integer": ctypes.c_int, "Boolean": ctypes.c_int}  # fmi2Boolean is int
+
+
 class _Fmu:
     """Raw ctypes entry points of one instantiated Slave (FMPy's own function objects keep
     their argtypes; these are fresh ones with cheap argument conversion)."""
@@ -237,105 +250,127 @@ class _Fmu:
         self.slave = slave
         dll = slave.fmu.dll
         self.c = ctypes.c_void_p(slave.fmu.component)
-        self.get_real = dll["fmi2GetReal"]
-        self.get_real.argtypes = [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_size_t, ctypes.c_void_p]
-        self.get_real.restype = ctypes.c_int
-        self.set_real = dll["fmi2SetReal"]
-        self.set_real.argtypes = [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_size_t, ctypes.c_void_p]
-        self.set_real.restype = ctypes.c_int
-        self.do_step = dll["fmi2DoStep"]
-        self.do_step.argtypes = [ctypes.c_void_p, ctypes.c_double, ctypes.c_double, ctypes.c_int]
-        self.do_step.restype = ctypes.c_int
+
+        def bind(name, *argtypes):
+            fn = dll[name]
+            fn.argtypes = [ctypes.c_void_p, *argtypes]
+            fn.restype = ctypes.c_int
+            return fn
+
+        array = [ctypes.c_void_p, ctypes.c_size_t, ctypes.c_void_p]
+        self.get = {t: bind(f"fmi2Get{t}", *array) for t in _C_TYPES}
+        self.set = {t: bind(f"fmi2Set{t}", *array) for t in _C_TYPES}
+        self.get_real = self.get["Real"]
+        self.do_step = bind("fmi2DoStep", ctypes.c_double, ctypes.c_double, ctypes.c_int)
 
     def fail(self, what: str, status: int):
-        return self.slave.failure(what, f"status {status}")
+        return self.slave.status_failure(what, status)
+
+    def step(self, t: float, h: float) -> None:
+        """fmi2DoStep from ``t`` with FMI 2.0 semantics: _Terminated or an error naming the status."""
+        s = self.do_step(self.c, t, h, 1)
+        if s > Status.WARNING:
+            if s == Status.DISCARD and self.slave.terminated():
+                raise _Terminated(self.slave, t)
+            raise self.fail(f"fmi2DoStep at t = {t:.9g} s", s)
 
 
 class _Link:
-    """Consecutive connections between one pair of components: one fmi2GetReal, one
-    fmi2SetReal (an affine map applied in Python, only where it is not the identity)."""
+    """Consecutive connections of one type between one pair of components: one fmi2Get*, one
+    fmi2Set* (an affine map applied in Python, only where it is not the identity: Real only)."""
 
-    def __init__(self, conns: list[Connection], src: _Fmu, dst: _Fmu, src_vrs: list[int], dst_vrs: list[int]):
+    def __init__(self, conns: list[Connection], src: _Fmu, dst: _Fmu, src_vrs: list[int], dst_vrs: list[int],
+                 kind: str = "Real"):
         self.conns, self.src, self.dst = conns, src, dst
         n = len(conns)
         self.n = n
+        self.get, self.set = src.get[kind], dst.set[kind]
         self.src_vrs = (ctypes.c_uint * n)(*src_vrs)
         self.dst_vrs = (ctypes.c_uint * n)(*dst_vrs)
-        self.src_buf = (ctypes.c_double * n)()
+        self.src_buf = (_C_TYPES[kind] * n)()
         self.maps = [(i, c.factor, c.offset) for i, c in enumerate(conns) if not c.identity]
         self.dst_buf = (ctypes.c_double * n)() if self.maps else self.src_buf
+        self.what = f"{kind} of {', '.join(str(c) for c in conns)}"
 
     def transfer(self, t: float) -> None:
-        s = self.src.get_real(self.src.c, self.src_vrs, self.n, self.src_buf)
-        if s > 1:
-            raise self.src.fail(f"fmi2GetReal of {', '.join(str(c) for c in self.conns)} at t = {t:.9g} s", s)
+        s = self.get(self.src.c, self.src_vrs, self.n, self.src_buf)
+        if s > Status.WARNING:
+            raise self.src.fail(f"fmi2Get{self.what} at t = {t:.9g} s", s)
         if self.maps:
             src, dst = self.src_buf, self.dst_buf
             for i in range(self.n):
                 dst[i] = src[i]
             for i, factor, offset in self.maps:
                 dst[i] = factor * src[i] + offset
-        s = self.dst.set_real(self.dst.c, self.dst_vrs, self.n, self.dst_buf)
-        if s > 1:
-            raise self.dst.fail(f"fmi2SetReal of {', '.join(str(c) for c in self.conns)} at t = {t:.9g} s", s)
+        s = self.set(self.dst.c, self.dst_vrs, self.n, self.dst_buf)
+        if s > Status.WARNING:
+            raise self.dst.fail(f"fmi2Set{self.what} at t = {t:.9g} s", s)
 
 
 def _links(conns: list[Connection], fmus: dict[str, _Fmu]) -> list[_Link]:
+    """Connections grouped into links (types checked by :func:`check_system`)."""
+    def kind(c: Connection) -> str:
+        return fmus[c.src].slave.var(c.src_var).type
+
     groups: list[list[Connection]] = []
     for c in conns:
-        if groups and c.src != c.dst and (groups[-1][0].src, groups[-1][0].dst) == (c.src, c.dst):
-            groups[-1].append(c)
+        g = groups[-1] if groups else None
+        if g and c.src != c.dst and (g[0].src, g[0].dst, kind(g[0])) == (c.src, c.dst, kind(c)):
+            g.append(c)
         else:
             groups.append([c])
     out = []
     for g in groups:
         src, dst = fmus[g[0].src], fmus[g[0].dst]
-        svars = [src.slave.var(c.src_var) for c in g]
-        dvars = [dst.slave.var(c.dst_var) for c in g]
-        for c, sv, dv in zip(g, svars, dvars):
-            if sv.type != "Real" or dv.type != "Real":
-                raise UserError(f"connection {c}: only Real connections are supported ({sv.type} -> {dv.type})")
-        out.append(_Link(g, src, dst, [v.valueReference for v in svars], [v.valueReference for v in dvars]))
+        out.append(_Link(g, src, dst, [src.slave.var(c.src_var).valueReference for c in g],
+                         [dst.slave.var(c.dst_var).valueReference for c in g], kind(g[0])))
     return out
 
 
 class _Sampler:
-    """Reads the recorded signals into row k of ``data``: one fmi2GetReal per run of
-    consecutive columns of the same FMU, written straight into the array."""
+    """Reads the recorded signals into row k of ``data``: one fmi2Get* per run of consecutive
+    columns of the same FMU and type; Real values written straight into the array."""
 
-    def __init__(self, record: list[str], fmus: dict[str, _Fmu], data: np.ndarray):
+    def __init__(self, record: list[str], fmus: dict[str, _Fmu], data: np.ndarray, system: System):
         self.data = data
         self.row_bytes = data.strides[0]
         self.base = data.ctypes.data
-        runs: list[tuple[_Fmu, list[int], int]] = []
+        runs: list[tuple[_Fmu, str, list[int], list[int]]] = []
         for col, signal in enumerate(record, start=1):
-            comp, name = signal.split(".", 1)
-            if comp not in fmus:
-                raise UserError(f"recorded signal {signal}: unknown component {comp!r}")
-            fmu = fmus[comp]
-            v = fmu.slave.var(name)
-            if v.type != "Real":
-                raise UserError(f"recorded signal {signal} is {v.type}: only Real signals can be recorded")
-            if runs and runs[-1][0] is fmu:
-                runs[-1][1].append(v.valueReference)
+            comp, v = system.signal(signal, "recorded signal")
+            fmu = fmus[comp.name]
+            if runs and runs[-1][0] is fmu and runs[-1][1] == v.type and runs[-1][3][-1] == col - 1:
+                runs[-1][2].append(v.valueReference)
+                runs[-1][3].append(col)
             else:
-                runs.append((fmu, [v.valueReference], col))
-        self.runs = [(f, (ctypes.c_uint * len(vrs))(*vrs), len(vrs), col * 8) for f, vrs, col in runs]
+                runs.append((fmu, v.type, [v.valueReference], [col]))
+        self.runs = [(f, f.get[t], (ctypes.c_uint * len(vrs))(*vrs), len(vrs), cols[0] * 8,
+                      None if t == "Real" else ((ctypes.c_int * len(vrs))(), slice(cols[0], cols[-1] + 1),
+                                                t == "Boolean"))
+                     for f, t, vrs, cols in runs]
         self.count = 0  # rows sampled
 
     def sample(self, k: int, t: float) -> None:
         addr = self.base + k * self.row_bytes
-        for f, vrs, n, off in self.runs:
-            s = f.get_real(f.c, vrs, n, addr + off)
-            if s > 1:
-                raise f.fail(f"fmi2GetReal at t = {t:.9g} s", s)
+        for f, get, vrs, n, off, ints in self.runs:
+            if ints is None:
+                s = get(f.c, vrs, n, addr + off)
+            else:
+                buf, cols, boolean = ints
+                s = get(f.c, vrs, n, buf)
+                self.data[k, cols] = np.not_equal(buf, 0) if boolean else buf  # fmi2True may be any non-zero
+            if s > Status.WARNING:
+                raise f.fail(f"reading the recorded signals at t = {t:.9g} s", s)
         self.data[k, 0] = t
         self.count = k + 1
 
 
-def _run_python(system: System, master: str, sinks: Sequence[Sink], progress: bool) -> RunResult:
-    n = _n_steps(system)
-    _check_names(system)
+def _run_python(system: System, master: str, sinks: Sequence[Sink], progress: bool,
+                max_steps: int | None = None) -> RunResult:
+    """``max_steps``: stop after that many steps (the container's replay of a failure)."""
+    n = check_system(system)
+    if max_steps is not None:
+        n = min(n, max_steps)
     start, stop, h = system.start_time, system.stop_time, system.step_size
     slaves: dict[str, Slave] = {}
     opened: list[Sink] = []
@@ -344,15 +379,16 @@ def _run_python(system: System, master: str, sinks: Sequence[Sink], progress: bo
     bar = _Progress(progress, start, stop)
     sampler: _Sampler | None = None
     sent = 0  # rows 0 .. sent-1 are checked and with the sinks
+    ended: _Terminated | None = None
     try:
         for comp in system.components:
-            s = slaves[comp.name] = Slave(comp.fmu, comp.name)
+            s = slaves[comp.name] = Slave(comp.fmu, comp.name, md=comp.md)
             s.enter_initialization(start, stop)
             for name, value in comp.parameters.items():
                 s.set(name, value)
         fmus = {name: _Fmu(s) for name, s in slaves.items()}
         if master == "gauss-seidel":
-            mds = {name: s.md for name, s in slaves.items()}
+            mds = {c.name: c.md for c in system.components}
             order, delayed = gauss_seidel_order(system, mds)
             transfer = [system.connections[i] for i in _transfer_order(system, mds)]
             notes.append("Gauss-Seidel order: " + " -> ".join(order))
@@ -365,10 +401,10 @@ def _run_python(system: System, master: str, sinks: Sequence[Sink], progress: bo
         else:
             transfer = list(system.connections)
         links = _links(transfer, fmus)
-        record = recorded_signals(system, {n: s.vars for n, s in slaves.items()})
+        record = recorded_signals(system)
         columns = ["time", *record]
         data = np.empty((n + 1, len(columns)))
-        sampler = _Sampler(record, fmus, data)
+        sampler = _Sampler(record, fmus, data, system)
         for s in slaves.values():
             s.exit_initialization()
         for sink in sinks:
@@ -389,34 +425,33 @@ def _run_python(system: System, master: str, sinks: Sequence[Sink], progress: bo
             if bad is not None:
                 raise _non_finite(columns, data[stop_at])
 
-        steppers = [(f, "fmi2DoStep at t = {:.9g} s") for f in fmus.values()]
-        for k in range(n + 1):
-            t = start + k * h
-            if master == "jacobi":
-                for link in links:  # all outputs at t first, then all steps
-                    link.transfer(t)
-                sampler.sample(k, t)
-                if k == n:
-                    break
-                for f, what in steppers:
-                    s = f.do_step(f.c, t, h, 1)
-                    if s > 1:
-                        raise f.fail(what.format(t), s)
-            else:
-                if k > 0:
-                    for f, inputs in sweep:  # step t - h -> t, one component after the other
-                        for link in inputs:
-                            link.transfer(t - h)
-                        s = f.do_step(f.c, start + (k - 1) * h, h, 1)
-                        if s > 1:
-                            raise f.fail(f"fmi2DoStep at t = {start + (k - 1) * h:.9g} s", s)
-                for link in links:  # consistent sample: every input from its source at t
-                    link.transfer(t)
-                sampler.sample(k, t)
-            if k % HAND_OVER_ROWS == 0:
-                hand_over(k + 1)
-                bar.update(t)
-        hand_over(n + 1)
+        steppers = list(fmus.values())
+        try:
+            for k in range(n + 1):
+                t = start + k * h
+                if master == "jacobi":
+                    for link in links:  # all outputs at t first, then all steps
+                        link.transfer(t)
+                    sampler.sample(k, t)
+                    if k == n:
+                        break
+                    for f in steppers:
+                        f.step(t, h)
+                else:
+                    if k > 0:
+                        for f, inputs in sweep:  # step t - h -> t, one component after the other
+                            for link in inputs:
+                                link.transfer(t - h)
+                            f.step(start + (k - 1) * h, h)
+                    for link in links:  # consistent sample: every input from its source at t
+                        link.transfer(t)
+                    sampler.sample(k, t)
+                if k % HAND_OVER_ROWS == 0:
+                    hand_over(k + 1)
+                    bar.update(t)
+        except _Terminated as end:  # a normal end: the rows so far are the result
+            ended = end
+        hand_over(sampler.count)
         bar.done()
     except BaseException as exc:
         bar.abort()
@@ -438,10 +473,27 @@ def _run_python(system: System, master: str, sinks: Sequence[Sink], progress: bo
             s.close()
     for sink in opened:
         sink.close(True)
-    return RunResult(columns, data, True, time.perf_counter() - wall0, master, notes)
+    data = data[:sampler.count]
+    if ended is not None:
+        notes.append(str(ended))
+    return RunResult(columns, data, True, time.perf_counter() - wall0, master, notes,
+                     end_time=float(data[-1, 0]), early_end=str(ended) if ended else None,
+                     step_size=h, step_size_from=system.step_size_from)
 
 
 # -- the container master --------------------------------------------------------------------
+
+class _Signals(ctypes.Structure):
+    """``Signals`` of fmus/native/runtime/container_driver.c."""
+    _fields_ = [(name, ctypes.c_void_p) for name in
+                ("do_step", "get_real", "get_integer", "get_boolean", "get_boolean_status",
+                 "rvrs", "ivrs", "bvrs", "rcols", "icols", "bcols")] + \
+               [("nr", ctypes.c_size_t), ("ni", ctypes.c_size_t), ("nb", ctypes.c_size_t),
+                ("rbuf", ctypes.c_void_p), ("ibuf", ctypes.c_void_p)]
+
+
+DRIVER_OK, DRIVER_DO_STEP_FAILED, DRIVER_GET_FAILED, DRIVER_NON_FINITE, DRIVER_TERMINATED = range(5)
+
 
 def _run_container(system: System, sinks: Sequence[Sink], progress: bool) -> RunResult:
     from .container import (
@@ -450,30 +502,53 @@ def _run_container(system: System, sinks: Sequence[Sink], progress: bool) -> Run
         load_driver,
     )
 
-    n = _n_steps(system)
-    _check_names(system)
+    n = check_system(system)
     start, stop, h = system.start_time, system.stop_time, system.step_size
     wall0 = time.perf_counter()
     notes = ["container FMU (fmpy.container_fmu) couples like Jacobi: outputs copied after every step"]
     slave = None
     opened: list[Sink] = []
     bar = _Progress(progress, start, stop)
+    ended: str | None = None
     try:
         unzipdir = cached_container_dir(system)
         slave = ContainerSlave(unzipdir, system.name or "system", keep_dir=True)
         names = {v.name: v for v in slave.md.modelVariables}
-        record = recorded_signals(system, {c.name: _variables(c.fmu) for c in system.components})
+        record = recorded_signals(system)
         columns = ["time", *record]
-        vrs = (ctypes.c_uint * len(record))(*[names[s].valueReference for s in record])
-        nvr = len(record)
+        typed: dict[str, tuple[list[int], list[int]]] = {t: ([], []) for t in _C_TYPES}
+        for col, signal in enumerate(record, start=1):
+            v = names[signal]
+            typed[v.type][0].append(v.valueReference)
+            typed[v.type][1].append(col)
         slave.enter_initialization(start, stop)
         slave.exit_initialization()
         f = _Fmu(slave)
+        keep = []  # ctypes arrays the driver points into
+
+        def arr(ctype, values):
+            a = (ctype * max(len(values), 1))(*values)
+            keep.append(a)
+            return ctypes.addressof(a)
+
+        (rv, rc), (iv, ic), (bv, bc) = typed["Real"], typed["Integer"], typed["Boolean"]
+        contiguous = rc == list(range(1, len(rc) + 1))
+        sig = _Signals(
+            do_step=ctypes.cast(f.do_step, ctypes.c_void_p), get_real=ctypes.cast(f.get["Real"], ctypes.c_void_p),
+            get_integer=ctypes.cast(f.get["Integer"], ctypes.c_void_p),
+            get_boolean=ctypes.cast(f.get["Boolean"], ctypes.c_void_p),
+            # FMPy's container does not implement fmi2GetBooleanStatus (it logs an error): a
+            # discard is told apart by the replay below
+            get_boolean_status=None,
+            rvrs=arr(ctypes.c_uint, rv), ivrs=arr(ctypes.c_uint, iv), bvrs=arr(ctypes.c_uint, bv),
+            rcols=None if contiguous else arr(ctypes.c_size_t, rc), icols=arr(ctypes.c_size_t, ic),
+            bcols=arr(ctypes.c_size_t, bc), nr=len(rv), ni=len(iv), nb=len(bv),
+            rbuf=arr(ctypes.c_double, [0.0] * len(rv)), ibuf=arr(ctypes.c_int, [0] * max(len(iv), len(bv))))
         data = np.empty((n + 1, len(columns)))
         base, row_bytes = data.ctypes.data, data.strides[0]
-        st = f.get_real(f.c, vrs, nvr, base + 8)
-        if st > 1:
-            raise f.fail(f"fmi2GetReal at t = {start:.9g} s", st)
+        st = _sample_signals(sig, f, data[0])
+        if st > Status.WARNING:
+            raise f.fail(f"reading the recorded signals at t = {start:.9g} s", st)
         data[0, 0] = start
         for sink in sinks:
             sink.open(columns)
@@ -487,28 +562,29 @@ def _run_container(system: System, sinks: Sequence[Sink], progress: bool) -> Run
         if driver is None:
             notes.append("no C compiler: the container is stepped through ctypes (slower)")
         t_fmu = ctypes.c_double()
-        st = f.get_real(f.c, (ctypes.c_uint * 1)(0), 1, ctypes.addressof(t_fmu))
+        f.get_real(f.c, (ctypes.c_uint * 1)(0), 1, ctypes.addressof(t_fmu))
         done_c, status_c = ctypes.c_long(), ctypes.c_int()
-        time_vr = (ctypes.c_uint * 1)(0)
         k = 0  # rows 0..k are written
         while k < n:
             m = min(BLOCK_ROWS, n - k)
             if driver is not None:
-                code = driver(ctypes.cast(f.do_step, ctypes.c_void_p), ctypes.cast(f.get_real, ctypes.c_void_p),
-                              f.c, ctypes.byref(t_fmu), h, start, k, m, vrs, nvr,
+                code = driver(ctypes.byref(sig), f.c, ctypes.byref(t_fmu), h, start, k, m,
                               base + (k + 1) * row_bytes, len(columns), ctypes.byref(done_c),
                               ctypes.byref(status_c))
                 done, status = done_c.value, status_c.value
             else:
-                code, done, status = _ctypes_steps(f, t_fmu, time_vr, h, start, k, m, vrs, nvr, data)
+                code, done, status = _ctypes_steps(sig, f, t_fmu, h, start, k, m, data)
             if done:
                 for sink in opened:
                     sink.write_block(data[k + 1:k + 1 + done])
-            if code == 1:
-                raise f.fail(f"fmi2DoStep at t = {start + (k + done) * h:.9g} s", status)
-            if code == 2:
-                raise f.fail(f"fmi2GetReal at t = {start + (k + done + 1) * h:.9g} s", status)
-            if code == 3:
+            t_fail = start + (k + done) * h
+            if code in (DRIVER_DO_STEP_FAILED, DRIVER_TERMINATED):
+                ended = _inner_outcome(system, k + done, f.fail(f"fmi2DoStep at t = {t_fail:.9g} s", status))
+                data = data[:k + done + 1]
+                break
+            if code == DRIVER_GET_FAILED:
+                raise f.fail(f"reading the recorded signals at t = {t_fail + h:.9g} s", status)
+            if code == DRIVER_NON_FINITE:
                 raise _non_finite(columns, data[k + 1 + done])
             k += m
             bar.update(start + k * h)
@@ -524,34 +600,59 @@ def _run_container(system: System, sinks: Sequence[Sink], progress: bool) -> Run
             slave.close()
     for sink in opened:
         sink.close(True)
-    return RunResult(columns, data, True, time.perf_counter() - wall0, "container", notes)
+    if ended:
+        notes.append(ended)
+    return RunResult(columns, data, True, time.perf_counter() - wall0, "container", notes,
+                     end_time=float(data[-1, 0]), early_end=ended, step_size=h,
+                     step_size_from=system.step_size_from)
 
 
-def _ctypes_steps(f: _Fmu, t_fmu, time_vr, h, start, k0, m, vrs, nvr, data) -> tuple[int, int, int]:
-    """The C driver's loop in Python (no C compiler): same calls, same rows."""
-    base, row_bytes = data.ctypes.data, data.strides[0]
+def _inner_outcome(system: System, k: int, container_error: UserError) -> str:
+    """The container's fmi2DoStep from step ``k`` failed or discarded: FMPy's container
+    returns one status for all its components and implements no fmi2GetBooleanStatus, so
+    steps 0..k are replayed with the Jacobi master, whose samples equal the container's bit
+    for bit. Returns the early-end message (an inner FMU terminated), or raises the inner
+    FMU's error; the container's own error if the replay does not reproduce it."""
+    replay = _run_python(system, "jacobi", (), False, max_steps=k + 1)
+    if replay.early_end:
+        return replay.early_end
+    raise container_error
+
+
+def _sample_signals(sig: _Signals, f: _Fmu, row: np.ndarray) -> int:
+    """The driver's ``sample`` in Python: one row of the recorded signals."""
+    for vrs, cols, n, get, ctype in ((sig.rvrs, sig.rcols, sig.nr, f.get["Real"], ctypes.c_double),
+                                     (sig.ivrs, sig.icols, sig.ni, f.get["Integer"], ctypes.c_int),
+                                     (sig.bvrs, sig.bcols, sig.nb, f.get["Boolean"], ctypes.c_int)):
+        if n == 0:
+            continue
+        buf = (ctype * n)()
+        s = get(f.c, vrs, n, buf)
+        if s > Status.WARNING:
+            return s
+        idx = list(range(1, n + 1)) if not cols else list((ctypes.c_size_t * n).from_address(cols))
+        values = np.array(buf[:], dtype=float)
+        row[idx] = (values != 0) if get is f.get["Boolean"] else values
+    return 0
+
+
+def _ctypes_steps(sig: _Signals, f: _Fmu, t_fmu, h, start, k0, m, data) -> tuple[int, int, int]:
+    """The C driver's loop in Python (no C compiler): same calls, same rows, same codes."""
+    time_vr = (ctypes.c_uint * 1)(0)
     for i in range(m):
         s = f.do_step(f.c, t_fmu.value, h, 1)
-        if s > 1:
-            return 1, i, s
+        if s > Status.WARNING:
+            return DRIVER_DO_STEP_FAILED, i, s
         row = k0 + 1 + i
         s = f.get_real(f.c, time_vr, 1, ctypes.addressof(t_fmu))
-        if s <= 1:
-            s = f.get_real(f.c, vrs, nvr, base + row * row_bytes + 8)
-        if s > 1:
-            return 2, i, s
+        if s <= Status.WARNING:
+            s = _sample_signals(sig, f, data[row])
+        if s > Status.WARNING:
+            return DRIVER_GET_FAILED, i, s
         data[row, 0] = start + (k0 + i + 1) * h
         if not np.isfinite(data[row]).all():
-            return 3, i, 0
-    return 0, m, 0
-
-
-def _variables(fmu: Path) -> dict:
-    from fmpy import read_model_description
-
-    if not Path(fmu).is_file():
-        raise UserError(f"{fmu}: FMU not found (run `railfmu build`)")
-    return {v.name: v for v in read_model_description(str(fmu)).modelVariables}
+            return DRIVER_NON_FINITE, i, 0
+    return DRIVER_OK, m, 0
 
 
 # -- entry point -----------------------------------------------------------------------------
@@ -560,7 +661,9 @@ def run(system: System, master: str = "jacobi", sinks: Sequence[Sink] = (), prog
     """Run ``system`` with ``master`` (one of :data:`MASTERS`), feeding ``sinks`` as it goes.
 
     Sinks get ``open(columns)``, then the rows (``write`` per sample from the Python
-    masters, ``write_block`` from the container), then ``close(complete)``. On an error
+    masters, ``write_block`` from the container), then ``close(complete)``. An FMU that ends
+    the simulation (fmi2Discard + fmi2Terminated) ends the run normally at that communication
+    point: ``RunResult.early_end`` says who and when, the sinks close as complete. On an error
     (UserError: a failed FMU call with what the FMU logged, a non-finite sample) or
     Ctrl-C the sinks are closed with ``complete=False`` first, so what they hold stays
     readable, and the exception propagates. FMUs and temporary folders are always freed.

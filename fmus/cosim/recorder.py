@@ -31,7 +31,9 @@ def _signals_held():
 
 
 class CsvRecorder:
-    """Header line, then one line per sample with ``repr()`` floats (they round-trip exactly).
+    """Header line, then one line per sample with ``repr()`` floats (they round-trip exactly);
+    Integer signals as integers and Boolean ones as 0/1 (``types``: column -> FMI type, e.g.
+    :meth:`fmus.cosim.system.System.signal_types`; columns not in it are Real).
 
     Rows are formatted into memory and written with one ``write`` of whole lines to an
     unbuffered file at least once a second, so the file never ends in half a row, even if
@@ -41,8 +43,10 @@ class CsvRecorder:
 
     FLUSH_INTERVAL_S = 1.0
 
-    def __init__(self, path: Path):
+    def __init__(self, path: Path, types: dict[str, str] | None = None):
         self.path = Path(path)
+        self.types = dict(types or {})
+        self._format = None
         self.rows_written = 0
         self.last_time: float | None = None
         self.complete: bool | None = None
@@ -55,13 +59,19 @@ class CsvRecorder:
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self._file = open(self.path, "wb", buffering=0)  # noqa: SIM115 (open until close())
         self._file.write((",".join(columns) + "\n").encode())
+        kinds = [self.types.get(c, "Real") for c in columns]
+        if all(k == "Real" for k in kinds):
+            self._format = lambda values: ",".join(map(repr, values))
+        else:
+            fmt = [repr if k == "Real" else (lambda x: str(int(x))) for k in kinds]
+            self._format = lambda values: ",".join(f(x) for f, x in zip(fmt, values))
         self.rows_written = 0
         self.last_time = None
         self._last_flush = time.monotonic()
 
     def write(self, row: np.ndarray) -> None:
         values = row.tolist()
-        self._pending.append(",".join(map(repr, values)))
+        self._pending.append(self._format(values))
         self._pending_last = values[0]
         now = time.monotonic()
         if now - self._last_flush >= self.FLUSH_INTERVAL_S:
@@ -70,7 +80,7 @@ class CsvRecorder:
     def write_block(self, rows: np.ndarray) -> None:
         if len(rows) == 0:
             return
-        self._pending.extend(",".join(map(repr, r)) for r in rows.tolist())
+        self._pending.extend(map(self._format, rows.tolist()))
         self._pending_last = float(rows[-1, 0])
         now = time.monotonic()
         if now - self._last_flush >= self.FLUSH_INTERVAL_S:

@@ -8,6 +8,7 @@ why, instead of FMPy's bare "fmi2ExitInitializationMode failed with status 3".
 from __future__ import annotations
 
 import shutil
+from enum import IntEnum
 from pathlib import Path
 
 from fmpy import calloc, extract, free, read_model_description
@@ -17,7 +18,30 @@ from fmpy.fmi2 import (FMU2Slave, fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFr
 
 from ..errors import UserError
 
-_STATUS = ["OK", "Warning", "Discard", "Error", "Fatal", "Pending"]
+
+
+class Status(IntEnum):
+    """fmi2Status (FMI 2.0, section 2.1.3); ``str()`` gives the standard's name."""
+    OK = 0
+    WARNING = 1
+    DISCARD = 2
+    ERROR = 3
+    FATAL = 4
+    PENDING = 5
+
+    def __str__(self) -> str:
+        return "fmi2" + ("OK" if self is Status.OK else self.name.capitalize())
+
+    @classmethod
+    def name_of(cls, status: int) -> str:
+        """``fmi2Discard`` etc.; an integer outside the enum as ``status <n>``."""
+        try:
+            return str(cls(status))
+        except ValueError:
+            return f"status {status}"
+
+
+FMI2_TERMINATED = 3  # fmi2StatusKind fmi2Terminated, for fmi2GetBooleanStatus
 
 
 class FMUError(UserError):
@@ -27,13 +51,16 @@ class FMUError(UserError):
 class Slave:
     """An instantiated FMI 2.0 co-simulation FMU; ``messages`` holds (status, category, text)."""
 
-    def __init__(self, fmu: Path | str, instance_name: str = "instance", logging_on: bool = False):
+    def __init__(self, fmu: Path | str, instance_name: str = "instance", logging_on: bool = False,
+                 md=None):
+        """``md``: the FMU's model description when the caller has read it already
+        (:attr:`fmus.cosim.system.Component.md`)."""
         fmu = Path(fmu)
         if not fmu.is_file():
             raise UserError(f"{fmu}: FMU not found (run `railfmu build`)")
         self.path = fmu
         self.name = instance_name
-        self.md = read_model_description(str(fmu))
+        self.md = md if md is not None else read_model_description(str(fmu))
         self.vars = {v.name: v for v in self.md.modelVariables}
         self.dir = extract(str(fmu))
         self.messages: list[tuple[str, str, str]] = []
@@ -45,7 +72,7 @@ class Slave:
 
     def _make_callbacks(self) -> fmi2CallbackFunctions:
         def log(_env, _name, status, category, message):
-            self.messages.append((_STATUS[status] if 0 <= status < 6 else str(status),
+            self.messages.append((Status.name_of(status).removeprefix("fmi2"),
                                   (category or b"").decode(errors="replace"),
                                   (message or b"").decode(errors="replace").replace("%%", "%")))
 
@@ -63,6 +90,25 @@ class Slave:
         (``fallback`` when it logged none): the one wording of every FMU call error."""
         logged = "; ".join(m for s, _, m in self.messages[since:] if s in ("Error", "Fatal"))
         return FMUError(f"{self.path.name} ({self.name}): {what} failed: {logged or fallback}")
+
+    def status_failure(self, what: str, status: int, since: int = 0) -> FMUError:
+        """A call that returned ``status`` (worse than fmi2Warning), named as the standard names it."""
+        return self.failure(what, f"{Status.name_of(status)} (the FMU logged no reason)", since)
+
+    def terminated(self) -> bool:
+        """fmi2GetBooleanStatus(fmi2Terminated): after a fmi2Discard from fmi2DoStep, whether the
+        FMU ended the simulation (False if it cannot tell)."""
+        import ctypes
+
+        value = ctypes.c_int(0)
+        try:
+            fn = self.fmu.dll["fmi2GetBooleanStatus"]
+            fn.argtypes = [ctypes.c_void_p, ctypes.c_int, ctypes.POINTER(ctypes.c_int)]
+            fn.restype = ctypes.c_int
+            status = fn(ctypes.c_void_p(self.fmu.component), FMI2_TERMINATED, ctypes.byref(value))
+        except (AttributeError, OSError):
+            return False
+        return status <= Status.WARNING and value.value != 0
 
     def call(self, what: str, fn, *args):
         n = len(self.messages)

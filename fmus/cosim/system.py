@@ -1,20 +1,32 @@
 """A co-simulation system ready to run: what the SSP reader produces and the masters consume.
 
-Everything here is resolved: FMU files exist, parameter values are final (FMU defaults <
-SSD bindings < variant .ssv < command line), each connection carries one affine map
-``dst = factor * src + offset`` (the SSD's LinearTransformation composed with any unit
-conversion), and the experiment's time grid is fixed.
+Everything here is resolved: FMU files exist, each component carries its FMU's model
+description (read once, :func:`read_model`; the masters, the container and the writer take
+the variables from there), parameter values are final (FMU defaults < SSD bindings < variant
+.ssv < command line), each connection carries one affine map ``dst = factor * src + offset``
+(the SSD's LinearTransformation composed with any unit conversion; Real only), and the
+experiment's time grid is fixed. :func:`check_system` is the one set of checks every master,
+``railfmu validate`` and the writer apply to it.
 """
 
 from __future__ import annotations
 
+import hashlib
+import math
+import os
+import shutil
+import tempfile
+import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Protocol
 
 import numpy as np
 
+from ..errors import UserError
+
 Value = float | int | bool | str
+SIGNAL_TYPES = ("Real", "Integer", "Boolean")  # what a connection carries and signals.csv records
 
 
 @dataclass
@@ -22,6 +34,29 @@ class Component:
     name: str
     fmu: Path
     parameters: dict[str, Value] = field(default_factory=dict)  # FMU variable name -> value
+    model: object | None = field(default=None, repr=False, compare=False)  # fmpy ModelDescription
+    _by_name: dict | None = field(default=None, init=False, repr=False, compare=False)
+
+    @property
+    def md(self):
+        """The FMU's model description (read on first use when the component was built by hand)."""
+        if self.model is None:
+            self.fmu, self.model = read_model(self.fmu, f"Component {self.name!r}")
+        return self.model
+
+    @property
+    def variables(self) -> dict:
+        """The FMU's model variables by name."""
+        if self._by_name is None:
+            self._by_name = {v.name: v for v in self.md.modelVariables}
+        return self._by_name
+
+    def variable(self, name: str, where: str = ""):
+        try:
+            return self.variables[name]
+        except KeyError:
+            raise UserError(f"{where + ': ' if where else ''}{Path(self.fmu).name} ({self.name}): "
+                            f"no variable {name!r}") from None
 
 
 @dataclass
@@ -86,6 +121,7 @@ class System:
     source: Path | None = None  # the SSD (or .ssp) it came from, for messages
     description: str = ""
     warnings: list[str] = field(default_factory=list)  # e.g. an unconnected input keeping its start
+    step_size_from: str = "given"  # where the step size came from (annotation, --step-size, the FMUs)
 
     def component(self, name: str) -> Component:
         for c in self.components:
@@ -95,30 +131,173 @@ class System:
 
     @property
     def n_steps(self) -> int:
-        return round((self.stop_time - self.start_time) / self.step_size)
+        return n_steps(self.start_time, self.stop_time, self.step_size)
+
+    def signal(self, signal: str, where: str = ""):
+        """The model variable of ``component.variable`` (the longest component name that fits)."""
+        names = sorted((c.name for c in self.components), key=len, reverse=True)
+        comp = next((n for n in names if signal.startswith(n + ".")), None)
+        if comp is None:
+            raise UserError(f"{where or 'signal'} {signal!r}: no component {signal.partition('.')[0]!r} "
+                            "(expected component.variable)")
+        return self.component(comp), self.component(comp).variable(signal[len(comp) + 1:], where)
+
+    def signal_types(self) -> dict[str, str]:
+        """FMI type of every recorded signal (``time`` is Real)."""
+        return {"time": "Real", **{s: self.signal(s)[1].type for s in recorded_signals(self)}}
 
 
-def recorded_signals(system: System, variables: dict[str, dict]) -> list[str]:
-    """``system.record``, or every Real output of every component in component order;
-    ``variables`` maps component names to their FMU variables by name."""
-    from ..errors import UserError
-
+def recorded_signals(system: System) -> list[str]:
+    """``system.record``, or every output of type Real, Integer or Boolean of every component,
+    in component order."""
     if system.record:
         for signal in system.record:
             if "." not in signal:
                 raise UserError(f"recorded signal {signal!r}: expected component.variable")
         return list(system.record)
-    return [f"{c.name}.{v.name}" for c in system.components for v in variables[c.name].values()
-            if v.causality == "output" and v.type == "Real"]
+    return [f"{c.name}.{v.name}" for c in system.components for v in c.md.modelVariables
+            if v.causality == "output" and v.type in SIGNAL_TYPES]
+
+
+# -- reading an FMU once -----------------------------------------------------------------------
+
+def _platform() -> str:
+    import fmpy
+
+    return fmpy.platform
+
+
+def read_model(fmu: Path | str, where: str):
+    """``(path, model description)`` of an FMI 2.0 co-simulation FMU; UserError (one line) for
+    a missing file, an unreadable or non-FMI-2.0-CS FMU, or one without a binary for this
+    platform and without ``sources/``. An FMU with ``sources/`` but no binary is compiled once
+    (``fmpy.build.build_platform_binary``) into a cached copy, whose path is returned."""
+    from fmpy import read_model_description
+
+    fmu = Path(fmu)
+    if not fmu.is_file():
+        raise UserError(f"{where}: FMU {fmu} not found (run `railfmu build`)")
+    try:
+        md = read_model_description(str(fmu))
+    except Exception as exc:  # noqa: BLE001 - fmpy raises anything from BadZipFile to ValidationError
+        raise UserError(f"{where}: cannot read {fmu.name}: {' '.join(str(exc).split())}") from None
+    if md.fmiVersion != "2.0" or md.coSimulation is None:
+        raise UserError(f"{where}: {fmu.name} is not an FMI 2.0 co-simulation FMU (fmiVersion {md.fmiVersion})")
+    with zipfile.ZipFile(fmu) as z:
+        names = z.namelist()
+    binary = f"binaries/{_platform()}/{md.coSimulation.modelIdentifier}"
+    if any(n.startswith(binary + ".") for n in names):
+        return fmu, md
+    if not any(n.startswith("sources/") and n.endswith(".c") for n in names):
+        raise UserError(f"{where}: {fmu.name} has no binary for this platform ({_platform()}) and no "
+                        "sources/ to compile one from")
+    return _compiled(fmu, where), md
+
+
+def _compiled(fmu: Path, where: str) -> Path:
+    """A copy of ``fmu`` with a binary for this platform built from its ``sources/`` (cached by
+    the FMU's bytes)."""
+    from fmpy.build import build_platform_binary
+
+    key = hashlib.sha256(fmu.read_bytes()).hexdigest()[:20]
+    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    out = Path(base) / "railfmu" / "compiled" / key / fmu.name
+    if out.is_file():
+        return out
+    work = Path(tempfile.mkdtemp(prefix="railfmu-compile-"))
+    try:
+        with zipfile.ZipFile(fmu) as z:
+            z.extractall(work / "fmu")
+        (work / "build").mkdir()
+        saved = os.dup(1)
+        try:
+            # cmake talks on the process's stdout: keep it off the user's terminal
+            with open(work / "build.log", "wb") as log:
+                os.dup2(log.fileno(), 1)
+                build_platform_binary(work / "fmu", build_dir=work / "build")
+        except Exception as exc:  # noqa: BLE001 - cmake, the compiler, a bad build description
+            raise UserError(f"{where}: {fmu.name} has no binary for {_platform()} and compiling its "
+                            f"sources/ failed: {' '.join(str(exc).split())[:300]}") from None
+        finally:
+            os.dup2(saved, 1)  # the terminal back
+            os.close(saved)
+        out.parent.mkdir(parents=True, exist_ok=True)
+        tmp = out.with_name(out.name + f".{os.getpid()}.part")
+        with zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as z:
+            for p in sorted((work / "fmu").rglob("*")):
+                if p.is_file():
+                    z.write(p, p.relative_to(work / "fmu").as_posix())
+        os.replace(tmp, out)
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
+    return out
+
+
+# -- the one set of checks ---------------------------------------------------------------------
+
+def n_steps(start: float, stop: float, h: float, where: str = "") -> int:
+    """The number of communication steps of ``[start, stop]`` at ``h``: UserError unless ``h``
+    divides the interval to 1e-9 of a step."""
+    at = f"{where}: " if where else ""
+    if not all(map(math.isfinite, (start, stop, h))):
+        raise UserError(f"{at}start {start:g}, stop {stop:g} and step {h:g} s must be finite")
+    if h <= 0:
+        raise UserError(f"{at}step size {h:g} s must be positive")
+    if stop <= start:
+        raise UserError(f"{at}stop time {stop:g} s must be after the start time {start:g} s")
+    n = round((stop - start) / h)
+    if n < 1 or abs((stop - start) / h - n) > 1e-9 * max(n, 1):
+        raise UserError(f"{at}step size {h:g} s does not divide the interval [{start:g}, {stop:g}] s")
+    return n
+
+
+def check_system(system: System) -> int:
+    """Every check of a system before it runs, the same for every master and for ``railfmu
+    validate``: unique component names, FMUs found and FMI 2.0 CS, connections between known
+    variables (output or parameter -> input, Real -> Real, Integer -> Integer, Boolean ->
+    Boolean; a map other than the identity only on Real), parameters that exist, recorded
+    signals that exist and are Real, Integer or Boolean, a step size that divides the run.
+    Returns the number of steps."""
+    seen: set[str] = set()
+    for c in system.components:
+        if c.name in seen:
+            raise UserError(f"component {c.name!r} appears twice")
+        seen.add(c.name)
+        c.md  # noqa: B018 - reads (and checks) the FMU once
+        for name in c.parameters:
+            c.variable(name, f"parameter {c.name}.{name}")
+    for k in system.connections:
+        for comp in (k.src, k.dst):
+            if comp not in seen:
+                raise UserError(f"connection {k}: unknown component {comp!r}")
+        sv = system.component(k.src).variable(k.src_var, f"connection {k}")
+        dv = system.component(k.dst).variable(k.dst_var, f"connection {k}")
+        if dv.causality != "input":
+            raise UserError(f"connection {k}: {k.dst}.{k.dst_var} is a(n) {dv.causality}; a connection ends at an input")
+        if sv.type != dv.type:
+            raise UserError(f"connection {k}: type mismatch: {sv.type} -> {dv.type}")
+        if sv.type not in SIGNAL_TYPES:
+            raise UserError(f"connection {k}: {sv.type} connections are not supported "
+                            f"({', '.join(SIGNAL_TYPES)})")
+        if sv.type != "Real" and not k.identity:
+            raise UserError(f"connection {k}: a LinearTransformation or unit conversion needs Real "
+                            f"connectors, not {sv.type}")
+    for s in recorded_signals(system):
+        _, v = system.signal(s, "recorded signal")
+        if v.type not in SIGNAL_TYPES:
+            raise UserError(f"recorded signal {s} is {v.type}: only {', '.join(SIGNAL_TYPES)} can be recorded")
+    return n_steps(system.start_time, system.stop_time, system.step_size)
 
 
 class Sink(Protocol):
     """Receives the recorded samples of a run: the CSV recorder, observers.
 
-    ``columns`` are ``time`` followed by the recorded signals. Masters that step in Python
+    ``columns`` are ``time`` followed by the recorded signals; Integer and Boolean signals
+    arrive as numbers (0/1 for Boolean) in the same float rows. Masters that step in Python
     call :meth:`write` once per communication point; the container path calls
     :meth:`write_block` with many rows at once. ``close(complete)`` says whether the run
-    reached its stop time.
+    ended normally: at its stop time, or earlier because an FMU ended the simulation
+    (fmi2Discard + fmi2Terminated); then the rows up to that time are all there.
     """
 
     def open(self, columns: list[str]) -> None: ...

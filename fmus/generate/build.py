@@ -14,6 +14,7 @@ import re
 import shutil
 import subprocess
 import tempfile
+import threading
 import zipfile
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
@@ -65,11 +66,15 @@ def generate_sources(model: Model) -> tuple[str, dict[str, str]]:
     return guid, src
 
 
+_XML_LOCK = threading.Lock()  # libxml2 schema parsing (fmpy validates every modelDescription) is not thread-safe
+
+
 def _guid_of_fmu(path: Path) -> str | None:
     try:
         from fmpy import read_model_description
 
-        return read_model_description(str(path)).guid
+        with _XML_LOCK:  # build_all's threads: concurrent parses hung or failed with "Internal error"
+            return read_model_description(str(path)).guid
     except Exception:  # unreadable or foreign: rebuild
         return None
 

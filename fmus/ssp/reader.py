@@ -2,15 +2,18 @@
 
 :func:`read_system` applies what FMPy's own SSP support skips: parameter bindings in the SSD
 (inline and ``.ssv``), ``.ssm`` mappings, ``ssc:LinearTransformation``, unit checks and
-conversions, ``ssd:DefaultExperiment`` and a fixed step size from an annotation. Parameter
+conversions, ``ssd:DefaultExperiment`` and a fixed step size (``--step-size``, else our or the
+OSP annotation, else the smallest DefaultExperiment stepSize of the FMUs). Parameter
 values, lowest priority first:
 
     FMU start values < component-level bindings (document order) < system-level bindings
     (``component.param``) < the variant (``variants/<v>.ssv``) < ``overrides`` (``--set``)
 
 Every problem a user can cause is a one-line :class:`UserError` naming the file (with its
-line), the element and what is wrong. Unknown parameter names are errors even where SSP lets
-a tool ignore them: a typo in a study must not pass silently.
+line), the element and what is wrong; the system read is checked as every master checks it
+(:func:`fmus.cosim.system.check_system`), so ``railfmu validate`` reports what a run would
+refuse. Unknown parameter names are errors even where SSP lets a tool ignore them: a typo in
+a study must not pass silently.
 
 Helpers: ``ssp_xml`` (files, XML, schemas), ``ssp_units`` (unit algebra), ``ssp_params``
 (parameter sets, mappings, value checks), ``ssp_write`` (the ``.ssp`` writer).
@@ -23,7 +26,6 @@ import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from fmpy import read_model_description
 from lxml import etree
 
 from ..errors import UserError
@@ -62,7 +64,16 @@ from .xmltools import (
     parse_xml,
     schema_problems,
 )
-from ..cosim.system import Component, Connection, ObserverSpec, System, Value
+from ..cosim.system import (
+    Component,
+    Connection,
+    ObserverSpec,
+    System,
+    Value,
+    check_system,
+    n_steps,
+    read_model,
+)
 
 __all__ = ["list_variants", "read_system", "validate_ssp", "write_ssp"]
 
@@ -183,12 +194,18 @@ class _Reader:
             self._variant(variant)
         self._overrides(overrides)
         start, stop, step = self._time(*times, need=need_time)
-        return System(name=self.doc.get("name") or self.system.get("name"),
-                      components=[Component(c.name, c.fmu, dict(c.params)) for c in self.comps.values()],
-                      connections=connections, start_time=start, stop_time=stop, step_size=step,
-                      record=record, observers=observers,
-                      description=self.doc.get("description") or self.system.get("description") or "",
-                      warnings=self._unconnected(connections))
+        system = System(name=self.doc.get("name") or self.system.get("name"),
+                        components=[Component(c.name, c.fmu, dict(c.params), model=c.md)
+                                    for c in self.comps.values()],
+                        connections=connections, start_time=start, stop_time=stop, step_size=step,
+                        record=record, observers=observers,
+                        description=self.doc.get("description") or self.system.get("description") or "",
+                        warnings=self._unconnected(connections), step_size_from=self.step_from)
+        try:  # what every master checks, so that `railfmu validate` reports what a run would refuse
+            check_system(system)
+        except UserError as exc:
+            raise UserError(f"{self.file}: {exc}") from None
+        return system
 
     # -- components and their FMUs ---------------------------------------------------------
     def _components(self) -> list:
@@ -214,8 +231,7 @@ class _Reader:
         if el.get("implementation", "any") not in ("any", "CoSimulation"):
             raise UserError(f"{where}: implementation {el.get('implementation')!r} is not supported "
                             "(co-simulation FMUs only)")
-        fmu = self._fmu_file(el.get("source"), where)
-        md = self._model_description(fmu, where)
+        fmu, md = self._model_description(self._fmu_file(el.get("source"), where), where)
         comp = _Comp(name, fmu, md, Units(from_fmu(md)).then(OURS))
         self.comps[name] = comp
         for c in el.iterfind("ssd:Connectors/ssd:Connector", NS):
@@ -232,16 +248,11 @@ class _Reader:
         raise UserError(f"{where}: FMU {source} not found (run `railfmu build`)")
 
     def _model_description(self, fmu: Path, where: str):
+        """(path, model description) of an FMU, read once per file (:func:`read_model`: a
+        binary compiled from ``sources/`` when this platform has none)."""
         key = fmu.resolve()
         if key not in self._mds:
-            try:
-                md = read_model_description(str(fmu))
-            except Exception as exc:  # noqa: BLE001 - fmpy raises anything from BadZipFile to ValidationError
-                raise UserError(f"{where}: cannot read {fmu.name}: {one_line(exc)}") from None
-            if md.fmiVersion != "2.0" or md.coSimulation is None:
-                raise UserError(f"{where}: {fmu.name} is not an FMI 2.0 co-simulation FMU "
-                                f"(fmiVersion {md.fmiVersion})")
-            self._mds[key] = md
+            self._mds[key] = read_model(fmu, where)
         return self._mds[key]
 
     def _connector(self, comp: _Comp, el) -> None:
@@ -294,7 +305,8 @@ class _Reader:
         if dvar.causality != "input":
             raise UserError(f"{where}: end {d}.{dc} is a(n) {dvar.causality}; a connection ends at an input")
         if svar.type != dvar.type:
-            raise UserError(f"{where}: type mismatch: {svar.type} -> {dvar.type}")
+            raise UserError(f"{where}: type mismatch: {svar.type} -> {dvar.type} (a connection joins "
+                            "two variables of one type)")
         factor, offset = self._connection_map(el, where, src, svar, dst, dvar)
         return Connection(s, sc, d, dc, factor, offset)
 
@@ -326,6 +338,10 @@ class _Reader:
         if svar.type != "Real":
             if linear != IDENTITY:
                 raise UserError(f"{where}: a LinearTransformation needs Real connectors, not {svar.type}")
+            s_unit, d_unit = src.connectors.get(svar.name), dst.connectors.get(dvar.name)
+            if s_unit != d_unit:
+                raise UserError(f"{where}: a unit conversion ({s_unit} -> {d_unit}) needs Real connectors, "
+                                f"not {svar.type}")
             return IDENTITY
         s_unit, d_unit = src.connectors.get(svar.name, svar.unit), dst.connectors.get(dvar.name, dvar.unit)
         s_view, d_view = self.ssd_units.then(src.units), self.ssd_units.then(dst.units)
@@ -446,11 +462,18 @@ class _Reader:
 
     # -- time ---------------------------------------------------------------------------------
     def _time(self, start, stop, step, need: bool):
+        """Start, stop and step; ``self.step_from`` says where the step came from: --step-size,
+        our annotation or the OSP one on ssd:DefaultExperiment, else the smallest
+        DefaultExperiment stepSize of the components' FMUs."""
+        self.step_from = "--step-size" if step is not None else ""
         de = self.doc.find("ssd:DefaultExperiment", NS)
         if de is not None:
             start = start if start is not None else self._number(de, "startTime")
             stop = stop if stop is not None else self._number(de, "stopTime")
-            step = step if step is not None else self._step(de)
+            if step is None:
+                step, self.step_from = self._step(de)
+        if step is None:
+            step, self.step_from = self._fmu_step()
         start = 0.0 if start is None else float(start)
         if not need and (stop is None or step is None):
             return start, stop if stop is not None else start + 1.0, step or 1.0
@@ -458,30 +481,42 @@ class _Reader:
             raise UserError(f"{self.file}: no stop time: ssd:DefaultExperiment has no stopTime "
                             "and none was given (--stop-time)")
         if step is None:
-            raise UserError(f"{self.file}: no step size: add an {EXPERIMENT} annotation (rf:FixedStep "
-                            "stepSize) to ssd:DefaultExperiment or give --step-size")
+            raise UserError(f"{self.file}: no step size: no {EXPERIMENT} (rf:FixedStep) or {OSP} annotation "
+                            "on ssd:DefaultExperiment, no DefaultExperiment stepSize in any FMU, and no "
+                            "--step-size")
         stop, step = float(stop), float(step)
-        if not all(map(math.isfinite, (start, stop, step))):
-            raise UserError(f"{self.file}: start {start:g}, stop {stop:g} and step {step:g} s must be finite")
-        if step <= 0:
-            raise UserError(f"{self.file}: step size {step:g} s must be positive")
-        if stop <= start:
-            raise UserError(f"{self.file}: stop time {stop:g} s must be after the start time {start:g} s")
-        n = (stop - start) / step
-        if abs(n - round(n)) > 1e-9 * n:
-            raise UserError(f"{self.file}: step size {step:g} s does not divide the interval "
-                            f"[{start:g}, {stop:g}] s")
+        n_steps(start, stop, step, self.file)
         return start, stop, step
 
-    def _step(self, de) -> float | None:
+    def _step(self, de) -> tuple[float | None, str]:
         """Our rf:FixedStep, else libcosim's osp:FixedStepAlgorithm."""
         a = self._annotation(de, EXPERIMENT)
         fs = a.find("rf:FixedStep", NS) if a is not None else None
         if fs is not None:
-            return self._number(fs, "stepSize")
+            return self._number(fs, "stepSize"), f"the {EXPERIMENT} annotation"
         a = self._annotation(de, OSP)
         fs = a.find("osp:Algorithm/osp:FixedStepAlgorithm", NS) if a is not None else None
-        return self._number(fs, "baseStepSize") if fs is not None else None
+        if fs is not None:
+            return self._number(fs, "baseStepSize"), f"the {OSP} annotation"
+        return None, ""
+
+    def _fmu_step(self) -> tuple[float | None, str]:
+        """The smallest DefaultExperiment stepSize among the components' FMUs."""
+        steps = []
+        for c in self.comps.values():
+            de = c.md.defaultExperiment
+            text = de.stepSize if de is not None else None
+            try:
+                value = float(text) if text is not None else None
+            except ValueError:
+                raise UserError(f"{self.file}: Component {c.name!r}: {c.fmu.name} DefaultExperiment "
+                                f"stepSize={text!r} is not a number") from None
+            if value is not None and value > 0 and math.isfinite(value):
+                steps.append((value, c.name, c.fmu.name))
+        if not steps:
+            return None, ""
+        h, name, fmu = min(steps)
+        return h, f"the smallest DefaultExperiment stepSize of the FMUs ({name}: {fmu}, {h:g} s)"
 
     def _number(self, el, attr: str) -> float | None:
         text = el.get(attr)

@@ -1,11 +1,13 @@
 """A :class:`fmus.cosim.system.System` as a self-contained ``.ssp``: ``SystemStructure.ssd`` plus its
 FMUs in ``resources/``.
 
-What other importers need (libcosim in particular) is kept explicit: every component carries
-ONE inline ``ssv:ParameterSet`` with its final values (libcosim applies component-level
-bindings only), the step size is written both as our ``rf:FixedStep`` and as libcosim's
-``osp:FixedStepAlgorithm``, and each connection's affine map is a ``ssc:LinearTransformation``.
-Reading the archive back gives an equal System (apart from paths).
+What other importers need is kept explicit: every component carries ONE inline
+``ssv:ParameterSet`` with its final values (libcosim applies component-level bindings only),
+the step size is written as our ``rf:FixedStep``, as libcosim's ``osp:FixedStepAlgorithm``
+and as OMSimulator's fixed-step master (an ``org.openmodelica`` annotation, the FIRST of the
+system's annotations: OMSimulator 3.0 reads only the first ``ssc:Annotation`` of a system),
+and each connection's affine map is a ``ssc:LinearTransformation``. Reading the archive back
+gives an equal System (apart from paths).
 """
 
 from __future__ import annotations
@@ -14,22 +16,20 @@ import os
 import zipfile
 from pathlib import Path
 
-from fmpy import read_model_description
 from lxml import etree
 
-from ..errors import UserError
 from .units import BASE, OURS, Units, from_fmu
 from .xmltools import (
     NS,
+    OMS_NS,
     OSP_NS,
     RF_NS,
     SSC_NS,
     SSD_NS,
     SSV_NS,
-    one_line,
     schema_problems,
 )
-from ..cosim.system import System
+from ..cosim.system import System, check_system
 
 _KINDS = ("input", "output", "parameter", "calculatedParameter")  # causalities a connector can show
 
@@ -37,14 +37,8 @@ _KINDS = ("input", "output", "parameter", "calculatedParameter")  # causalities 
 def write_ssp(system: System, out: Path) -> Path:
     """Write ``system`` to the zip archive ``out`` (replaced atomically) and return its path."""
     out = Path(out)
-    mds = {}
-    for c in system.components:
-        if not Path(c.fmu).is_file():
-            raise UserError(f"Component {c.name!r}: FMU {c.fmu} not found (run `railfmu build`)")
-        try:
-            mds[c.name] = read_model_description(str(c.fmu))
-        except Exception as exc:  # noqa: BLE001 - as in the reader: any fmpy failure
-            raise UserError(f"Component {c.name!r}: cannot read {c.fmu}: {one_line(exc)}") from None
+    check_system(system)
+    mds = {c.name: c.md for c in system.components}
     resources = _resource_names(system)
     doc = _document(system, mds, resources)
     problems = schema_problems(doc, "ssd", "SystemStructure.ssd")
@@ -95,7 +89,7 @@ def _num(x: float) -> str:
 
 
 def _document(system: System, mds: dict, resources: dict[str, str]):
-    nsmap = {"ssd": SSD_NS, "ssc": SSC_NS, "ssv": SSV_NS, "rf": RF_NS, "osp": OSP_NS}
+    nsmap = {"ssd": SSD_NS, "ssc": SSC_NS, "ssv": SSV_NS, "rf": RF_NS, "osp": OSP_NS, "oms": OMS_NS}
     doc = etree.Element(f"{{{SSD_NS}}}SystemStructureDescription", nsmap=nsmap, version="1.0",
                         name=system.name)
     if system.description:
@@ -202,9 +196,12 @@ def _experiment(doc, system: System) -> None:
 
 
 def _system_annotations(sys_el, system: System) -> None:
-    if not system.observers and not system.record:
-        return
     annotations = _sub(sys_el, "ssd:Annotations")
+    # OMSimulator 3.0 (SystemWC) reads only the first annotation of a system, and without its
+    # own it has no step size: its fixed-step master comes first, ours are ignorable after it
+    oms = _sub(_sub(_sub(annotations, "ssc:Annotation", type="org.openmodelica"), "oms:Annotations"),
+               "oms:SimulationInformation")
+    _sub(oms, "oms:FixedStepMaster", description="oms-ma", stepSize=_num(system.step_size))
     if system.observers:
         observers = _sub(_sub(annotations, "ssc:Annotation", type="org.railfmu.observers"), "rf:Observers")
         for o in system.observers:

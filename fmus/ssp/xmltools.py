@@ -28,7 +28,8 @@ SSV_NS = "http://ssp-standard.org/SSP1/SystemStructureParameterValues"
 SSM_NS = "http://ssp-standard.org/SSP1/SystemStructureParameterMapping"
 RF_NS = "https://railfmu.org/ssp/1"
 OSP_NS = "http://opensimulationplatform.com/SSP/OSPAnnotations"
-NS = {"ssd": SSD_NS, "ssc": SSC_NS, "ssv": SSV_NS, "ssm": SSM_NS, "rf": RF_NS, "osp": OSP_NS}
+OMS_NS = "https://raw.githubusercontent.com/OpenModelica/OMSimulator/master/schema/oms.xsd"  # OMSimulator's
+NS = {"ssd": SSD_NS, "ssc": SSC_NS, "ssv": SSV_NS, "ssm": SSM_NS, "rf": RF_NS, "osp": OSP_NS, "oms": OMS_NS}
 
 SCHEMA_DIR = Path(fmpy.__file__).parent / "ssp" / "schema"
 _SCHEMA_FILES = {"ssd": "SystemStructureDescription.xsd", "ssv": "SystemStructureParameterValues.xsd",
