@@ -47,7 +47,7 @@ def test_reduced_standard_run(tmp_path):
     for f in ("alignment.png", "alignment_bands.png", "sensors.png", "estimates_smoother.csv", "report.md"):
         assert (out / f).is_file(), f
     report = (out / "report.md").read_text()
-    assert "Identification" in report and "| Muñoz et al. |" in report and "seed 000" not in report
+    assert "Identification" in report and "| Muñoz et al. |" in report
     assert "## Offline observer `smoother`" in report and "## Observer `smoother`" not in report
 
 
