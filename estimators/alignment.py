@@ -1,30 +1,30 @@
 r"""Lateral track alignment from axle-box gyro + accelerometers: the linear Kalman filter of
-seed 000 §4 (eqs. 9-27), on the wheelset + suspended-frame design model (SM) of §3.3.
+Muñoz et al., §4 (eqs. 9-27), on the wheelset + suspended-frame design model (SM) of §3.3.
 
 Design model
 ------------
 :data:`models.wheelset.WHEELSET` linearised about the centred wheelset
 (:meth:`models.base.Model.linearize`), ``dx = A x + B [xi, xi_rate]``,
 ``[ddy, ddpsi, ddy_f] = C x + D [xi, xi_rate]``, with ``x = [y, psi, y_f, dy, dpsi, dy_f]``.
-The alignment ``xi`` is appended to the state (seed eq. 9) as a random walk (seed eq. 12
+The alignment ``xi`` is appended to the state (the paper's eq. 9) as a random walk (eq. 12
 ``dxi/dt = 0`` plus process noise)::
 
     x_a = [y, psi, y_f, dy, dpsi, dy_f, xi]                      (m, rad, m, m/s, rad/s, m/s, m)
 
-    dx_a/dt = F_c x_a + w,      F_c = [[A, B[:, xi]],            (seed eq. 15; B[:, xi] is
+    dx_a/dt = F_c x_a + w,      F_c = [[A, B[:, xi]],            (eq. 15; B[:, xi] is
                                        [0,     0   ]]             M^-1 K_d of eq. 16)
     z       = H x_a + v,        H   = [[C[ddy],   D[ddy,   xi]],  wheelset lateral acc.  m/s2
                                        [e_dpsi,   0          ],  axle-box gyro          rad/s
                                        [C[ddy_f], D[ddy_f, xi]],  frame lateral acc.    m/s2
                                        [0,        1          ]]  virtual xi = 0         m
-                                                                  (seed eq. 17)
+                                                                  (eq. 17)
 
 The ``xi`` column of ``H`` is ``D``: the gravitational stiffness puts ``xi`` directly into the
 wheelset's acceleration (``D[ddy_f, xi]`` is 0 for this model; it is kept for generality).
 The input ``xi_rate`` has no column: the SM's forces do not depend on it (it only feeds the
 FMU's first-order hold), and ``B[:, xi_rate]`` is zero.
 
-The last row is the seed's *virtual* measurement: a zero reading of ``xi`` with standard
+The last row is the paper's *virtual* measurement: a zero reading of ``xi`` with standard
 deviation ``sigma_virtual`` at every sample. It is needed, not only convenient: a rigid lateral
 shift of wheelset, frame and track together (``y``, ``y_f``, ``xi`` + c) changes no creepage,
 no suspension force and no gravitational force, so without it the three sensors cannot tell
@@ -39,16 +39,16 @@ the linear model at every dt, and the process noise by Van Loan's method
 
     expm([[-F_c, Q_c], [0, F_c^T]] dt) = [[., Phi^-1 Q_d], [0, Phi^T]],   Q_d = Phi (Phi^-1 Q_d)
 
-``H`` needs no discretisation: ``z_k = H x_a(t_k)``. The seed discretises with an Euler step
+``H`` needs no discretisation: ``z_k = H x_a(t_k)``. The paper discretises with an Euler step
 whose position rows use a second-order Taylor expansion (eqs. 18-19); ``expm`` is the exact
 version of that, costs nothing at run time (computed once), and is stable at any ``dt``.
 
 Noise
 -----
 * Measurement noise ``R = diag(sigma_acc^2, sigma_gyro^2, sigma_acc^2, sigma_virtual^2)``:
-  the seed's §5 sensor values, 0.01 m/s2 for the accelerometers and 5e-4 rad/s for the gyro.
+  the paper's §5 sensor values, 0.01 m/s2 for the accelerometers and 5e-4 rad/s for the gyro.
 * Process noise ``Q_c = diag(0, 0, 0, q_acc, q_yaw, q_acc, q_xi)`` (continuous white-noise
-  intensities: m^2/s^3, rad^2/s^3, m^2/s). The seed estimates ``Q`` and ``R`` from the complete
+  intensities: m^2/s^3, rad^2/s^3, m^2/s). The paper estimates ``Q`` and ``R`` from the complete
   model's residuals (eqs. 28-31); the filter has no complete model, so:
 
   - ``q_xi``: between the ERRI B176 corner wavelengths (``2 pi / Omega_c`` = 7.6 m and
@@ -63,13 +63,13 @@ Noise
     Below ``Omega_r`` the ERRI spectrum is flat, i.e. exactly such a process, so
     ``omega_c = V Omega_r``: ``sigma_virtual = sqrt(q_xi / dt) / (V Omega_r)`` (0.28 m at
     20 m/s and 1 kHz). It scales with ``1 / sqrt(dt)``, so the filter hardly changes with the
-    sample rate. **Deviation**: the seed uses 5 mm (its sample time is not stated). On our FMU
+    sample rate. **Deviation**: the paper uses 5 mm (its sample time is not stated). On our FMU
     data at 1 kHz, 5 mm pins the common mode so hard that the long wavelengths are lost
     (J_rel 0.92 in 3-200 m: D2 0.59, D3 0.99; 0.23 on a 1 mm / 20 m harmonic); the
     spectrum-based value gives 0.17 and 0.11 (``tests/test_alignment.py``).
   - **Tuning the pair** (measured): the stationary filter's transfer function from the true
     alignment to its estimate, on its own design model, is flat at 0.934 from 0.1 to 5 Hz
-    at the spectrum-based pair (at 20 m/s, 1 kHz, the seed's sensor noise): every
+    at the spectrum-based pair (at 20 m/s, 1 kHz, the paper's sensor noise): every
     wavelength is shrunk by 7 %, and the pinning adds a phase lead of 14 deg at 200 m. A
     larger ``q_xi`` with a weaker pinning (a larger ``sigma_virtual``) lifts the gain towards
     1 (0.995 at 1e-2 m^2/s with the same corner) and moves the lead below the D3 band; the
@@ -81,7 +81,7 @@ Noise
 
 Filter
 ------
-Seed eqs. 20-26: ``x^- = F x^+``, ``P^- = F P^+ F^T + Q_d``, ``K = P^- H^T (H P^- H^T + R)^-1``,
+Eqs. 20-26 of the paper: ``x^- = F x^+``, ``P^- = F P^+ F^T + Q_d``, ``K = P^- H^T (H P^- H^T + R)^-1``,
 ``x^+ = x^- + K (z - H x^-)``, ``P^+ = (I - K H) P^- (I - K H)^T + K R K^T`` (Joseph form).
 
 * ``steady_state=True`` (default): the fixed gain of the stationary filter, from the discrete
@@ -99,8 +99,8 @@ sensor (NaN, or masked out by the observer bank) is left out: the update uses th
 present and the virtual reading (the fixed-gain filter with the gain of those rows at the
 stationary ``P^-``); a sample with no sensor is a prediction only.
 
-Smoother (offline, beyond the seed)
------------------------------------
+Smoother (offline, beyond the paper)
+------------------------------------
 :meth:`AlignmentKalmanFilter.smooth` adds the Rauch-Tung-Striebel backward pass to the same
 forward filter: ``x^s_k = x^+_k + C_k (x^s_{k+1} - F x^+_k)``, ``C_k = P^+_k F^T (P^-_{k+1})^-1``;
 for the fixed gain the stationary smoother, computed in the modified Bryson-Frazier form
@@ -111,13 +111,13 @@ pinning); the smoother removes the lag. It leans on
 the design model across time, so it needs a model that is right over the whole band: on the
 complete vehicle model it runs on its own equivalent SM (experiments/lateral_alignment/tune.py).
 
-Observability (seed eq. 27): :meth:`AlignmentKalmanFilter.observability_rank` is the rank of
-``control.obsv(F, H)``; 7 for the seed's parameters.
+Observability (the paper's eq. 27): :meth:`AlignmentKalmanFilter.observability_rank` is the rank of
+``control.obsv(F, H)``; 7 for the paper's parameters.
 
-Deviations from the seed: ``expm``/Van Loan instead of the modified Euler step; ``Q`` and
-``sigma_virtual`` from the track spectrum instead of eqs. 28-31 and 5 mm; the seed's eq. 16
+Deviations from the paper: ``expm``/Van Loan instead of the modified Euler step; ``Q`` and
+``sigma_virtual`` from the track spectrum instead of eqs. 28-31 and 5 mm; the paper's eq. 16
 gravitational term is replaced by the design model's derivation (see
-:mod:`models.wheelset`); the seed's eq. 17 prints the gyro and virtual rows with 6 entries,
+:mod:`models.wheelset`); the paper's eq. 17 prints the gyro and virtual rows with 6 entries,
 read here as selecting ``dpsi`` and ``xi``.
 """
 
@@ -171,7 +171,7 @@ _STATE_SCALE = np.array([1e-2, 1e-4, 1e-2, 1e-3, 1e-3, 1e-3, 1e-2])
 
 
 class AlignmentKalmanFilter(Observer):
-    """Seed 000's Kalman filter of the lateral track alignment under one wheelset.
+    """The Kalman filter of Muñoz et al. for the lateral track alignment under one wheelset.
 
     Inputs: ``ddy`` wheelset lateral acceleration (m/s2), ``dpsi`` wheelset yaw rate (rad/s),
     ``ddy_f`` suspended-frame lateral acceleration (m/s2); the virtual ``xi = 0`` is internal.
@@ -303,7 +303,7 @@ class AlignmentKalmanFilter(Observer):
         r"""Offline Rauch-Tung-Striebel smoother: times ``(n,)`` and measurements
         ``(n, len(inputs))`` as for :meth:`run` -> smoothed estimates ``(n, len(outputs))`` of
         the same outputs, each conditioned on the whole record (past *and* future). Beyond
-        seed 000, which filters only.
+        Muñoz et al., who filter only.
 
         Forward pass: exactly :meth:`run` (the same hook calls in the same order, so the
         filtered estimates are bit-identical; a dropped row is predicted over, a row with
@@ -410,7 +410,7 @@ class AlignmentKalmanFilter(Observer):
         return self.P_post.copy() if self.steady_state else self._kf.P.copy()
 
     def observability_rank(self) -> int:
-        """Rank of the observability matrix of (F, H) (seed eq. 27); 7 = observable."""
+        """Rank of the observability matrix of (F, H) (Muñoz et al., eq. 27); 7 = observable."""
         return int(np.linalg.matrix_rank(kalman.observability_matrix(self.F, self.H)))
 
     def finish(self) -> dict:

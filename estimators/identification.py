@@ -1,9 +1,9 @@
 r"""Identification of the simplified model (SM) against the complete model (CM), and the
-Kalman filter's noise covariances from CM runs: seed 000 §3.4 (eqs. 7-8) and §4.2 (eqs. 28-31).
+Kalman filter's noise covariances from CM runs: Muñoz et al., §3.4 (eqs. 7-8) and §4.2 (eqs. 28-31).
 
 Design model
 ------------
-:data:`models.wheelset.WHEELSET` (seed §3.3), linear, state ``x = [y, psi, y_f, dy, dpsi, dy_f]``
+:data:`models.wheelset.WHEELSET` (the paper's §3.3), linear, state ``x = [y, psi, y_f, dy, dpsi, dy_f]``
 (m, rad, m, m/s, rad/s, m/s), input the alignment ``xi`` (m) under the wheelset and its rate
 ``xi_rate`` (m/s): ``dx/dt = A(p) x + B(p) [xi, xi_rate]``. ``A`` and ``B`` are the model's own
 Jacobians, lambdified once in the parameters (the model is linear, so they do not depend on the
@@ -25,9 +25,9 @@ augmented system ``[x, xi, r]`` with ``d xi/dt = r``, ``dr/dt = 0``
 (``scipy.signal.lfilter``), so a 20000-step response costs about a millisecond. ``x_0 = 0``
 (the CM also starts at rest on the centred track).
 
-Identification (:func:`identify_primary`, seed eq. 8)
-----------------------------------------------------
-The seed minimises ``J_ls(p_opt) = 1/N sum_k |x_real(k) - x_mod(k, p_opt)|^2`` with
+Identification (:func:`identify_primary`, the paper's eq. 8)
+------------------------------------------------------------
+The paper minimises ``J_ls(p_opt) = 1/N sum_k |x_real(k) - x_mod(k, p_opt)|^2`` with
 ``x = [y, psi]`` and ``p_opt = [kx, cx, ky, cy]`` (eq. 7; all other SM parameters fixed, taken
 from the real vehicle). **Deviation**: that sum adds metres and radians; ``psi`` (~1e-4 rad) is
 then almost weightless against ``y`` (~1e-3 m), and ``kx``/``cx`` (the yaw suspension) would be
@@ -38,10 +38,10 @@ fitted by ``y`` alone. Each channel is therefore normalised by its CM rms::
 
 minimised by ``scipy.optimize.least_squares`` (trust region reflective) over ``log p_opt``
 (the parameters stay positive and are scaled alike), bounded to a factor 1000 around the
-initial values. The seed's unnormalised ``J_ls`` is reported too.
+initial values. The paper's unnormalised ``J_ls`` is reported too.
 
-Noise covariances (:func:`estimate_noise`, seed eqs. 28-31)
----------------------------------------------------------
+Noise covariances (:func:`estimate_noise`, the paper's eqs. 28-31)
+------------------------------------------------------------------
 With ``x^CM_k`` the CM's state mapped onto the filter's augmented state
 ``[y, psi, y_f, dy, dpsi, dy_f, xi]`` and ``z^CM_k`` the CM's (noisy) sensor readings
 ``[ddy, dpsi, ddy_f]`` plus the virtual ``xi = 0`` reading::
@@ -71,7 +71,7 @@ The position rows of ``Q`` (``~ dt^2`` smaller) and the off-diagonal terms have 
 filter's ``Q_c`` and are dropped (returned in ``Q``). Because the CM's model error and the
 alignment are not white noise, ``Q[.,.] / dt`` depends on ``dt``: the settings hold for the
 filter run at the ``dt`` of the data. The virtual row of eq. 31 gives ``rms(xi)``
-(``sigma_virtual_eq31``); the seed itself does not use it (it fixes 5 mm), and neither do the
+(``sigma_virtual_eq31``); the paper itself does not use it (it fixes 5 mm), and neither do the
 settings: the filter derives ``sigma_virtual`` from ``q_xi`` so that the alignment's forgetting
 corner stays at the ERRI B176 corner ``Omega_r`` (see :mod:`estimators.alignment`).
 """
@@ -177,7 +177,7 @@ def sm_response(params: Mapping[str, float] | None, t: np.ndarray, xi: np.ndarra
 class IdentificationResult:
     """Outcome of :func:`identify_primary`. ``values``/``initial``: kx (N/m), cx (N.s/m),
     ky (N/m), cy (N.s/m), per side; ``cost_*``: the normalised cost (NRMSE_y^2 + NRMSE_psi^2);
-    ``J_ls_*``: the seed's eq. 8 (m^2 + rad^2); ``nrmse_*``: rms(SM - CM) / rms(CM) of y and psi."""
+    ``J_ls_*``: eq. 8 of Muñoz et al. (m^2 + rad^2); ``nrmse_*``: rms(SM - CM) / rms(CM) of y and psi."""
     values: dict[str, float]
     initial: dict[str, float]
     cost_before: float
@@ -209,10 +209,10 @@ def identify_primary(t: np.ndarray, xi: np.ndarray, xi_rate: np.ndarray, y_cm: n
                      fixed: Mapping[str, float] | None = None, free: tuple[str, ...] = P_OPT,
                      bounds_factor: float = 1e3) -> IdentificationResult:
     """Identify the SM's primary suspension ``kx, cx, ky, cy`` (per side) from a CM run with
-    lateral alignment only (seed §3.4): least squares between the CM's (``y_cm`` m, ``psi_cm``
+    lateral alignment only (Muñoz et al., §3.4): least squares between the CM's (``y_cm`` m, ``psi_cm``
     rad) and the SM's wheelset response to the same ``xi`` (m), ``xi_rate`` (m/s) at ``t`` (s).
 
-    ``initial``: starting values (default: the WHEELSET defaults, seed Table 1); ``V``: speed
+    ``initial``: starting values (default: the WHEELSET defaults, Muñoz et al., Table 1); ``V``: speed
     (m/s); ``fixed``: other SM parameters (p_fix of eq. 7) if not the defaults; ``free``: the
     subset of kx, cx, ky, cy to fit (the others stay at ``initial``; e.g. for a profile of the
     cost); ``bounds_factor``: each fitted value stays within this factor of its initial value."""
@@ -267,7 +267,7 @@ def identify_primary(t: np.ndarray, xi: np.ndarray, xi_rate: np.ndarray, y_cm: n
 
 
 def filter_matrices(params: Mapping[str, float] | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """(F_c (7x7), H (4x7)) of the alignment filter's augmented model (seed eqs. 15, 17), as
+    """(F_c (7x7), H (4x7)) of the alignment filter's augmented model (Muñoz et al., eqs. 15, 17), as
     :class:`estimators.alignment.AlignmentKalmanFilter` builds them."""
     A, B = sm_matrices(params)
     F_c = np.zeros((7, 7))
@@ -284,7 +284,7 @@ def filter_matrices(params: Mapping[str, float] | None = None) -> tuple[np.ndarr
 
 @dataclass
 class NoiseEstimate:
-    """Outcome of :func:`estimate_noise`: the seed's discrete ``Q`` (7x7, over
+    """Outcome of :func:`estimate_noise`: the discrete ``Q`` of Muñoz et al. (7x7, over
     :data:`AUGMENTED_STATES`) and ``R`` (4x4, over :data:`MEASUREMENTS`) at ``dt``, and
     ``settings`` for :class:`estimators.alignment.AlignmentKalmanFilter` (see the module
     docstring for the mapping); ``details`` has the per-channel values."""
@@ -302,7 +302,7 @@ class NoiseEstimate:
 
 def estimate_noise(t: np.ndarray, states: np.ndarray, sensors: np.ndarray,
                    params: Mapping[str, float] | None = None, V: float = 20.0) -> NoiseEstimate:
-    """``Q`` and ``R`` of the alignment filter from a CM run (seed eqs. 28-31).
+    """``Q`` and ``R`` of the alignment filter from a CM run (Muñoz et al., eqs. 28-31).
 
     ``t`` (s, uniform); ``states`` (N x 7): the CM's state mapped onto
     ``[y, psi, y_f, dy, dpsi, dy_f, xi]`` (m, rad, m, m/s, rad/s, m/s, m): the leading wheelset,

@@ -1,10 +1,10 @@
-r"""Accuracy of a track-alignment estimate in the wavelength bands of EN 13848: seed 000 §5.3,
-eq. 32, Tables 2-4.
+r"""Accuracy of a track-alignment estimate in the wavelength bands of EN 13848: Muñoz et al.,
+§5.3, eq. 32, Tables 2-4.
 
 Wavelength bands
 ----------------
-EN 13848-1 (CEN, Railway applications - Track - Track geometry quality, seed ref. [3]) assesses
-track geometry in three wavelength ranges, quoted by the seed (§1 and §5.3)::
+EN 13848-1 (CEN, Railway applications - Track - Track geometry quality, ref. [3] of the paper)
+assesses track geometry in three wavelength ranges, quoted by the paper (§1 and §5.3)::
 
     D1 = 3-25 m,   D2 = 25-70 m,   D3 = 70-200 m,   "whole" = 3-200 m
 
@@ -12,25 +12,25 @@ A record is band-passed in the *spatial* domain: at the constant speed ``V`` (m/
 every ``dt`` (s) is a sample every ``ds = V dt`` metres, so the wavelength ``lambda`` is the
 spatial frequency ``1 / lambda`` (1/m) and the Nyquist wavelength is ``2 ds``.
 
-Band-pass (the seed: "filtered with a Butterworth bandpass filter in the range of interest";
+Band-pass (the paper: "filtered with a Butterworth bandpass filter in the range of interest";
 it states neither the order nor the phase): Butterworth of order 4 (scipy.signal.butter; order
 4 per edge, the band-pass has 8 poles), applied forwards and backwards (zero phase, the
 magnitude squared) in second-order sections by ``scipy.signal.sosfiltfilt``. The transfer
 function form with ``filtfilt`` is numerically unstable here: 1/200 m at ds = 0.02 m is a
 normalised frequency of 2e-4, and the polynomial coefficients of (b, a) lose all accuracy.
 
-Accuracy indices (seed eq. 32), per band::
+Accuracy indices (the paper's eq. 32), per band::
 
     J     = rms(BP(xi_est) - BP(xi_real))                 (reported in mm)
     J_rel = rms(BP(xi_est) - BP(xi_real)) / rms(BP(xi_real))
 
-``BP`` is the band-pass; the seed filters both profiles into each band and then compares them
+``BP`` is the band-pass; the paper filters both profiles into each band and then compares them
 (§5.3, Figs. 5-6), and J_rel divides by the rms of the *band-passed* truth (so it is the
-relative error within the band: the seed's Table 2 has J/J_rel = 0.21 mm / 0.48 in D1 because
+relative error within the band: the paper's Table 2 has J/J_rel = 0.21 mm / 0.48 in D1 because
 "the lower magnitude value of the D1 irregularities"). ``BP`` is linear, so
 ``BP(est) - BP(truth) = BP(est - truth)``.
 
-Which samples (decision): the seed's numbers are over the whole run (400 m, 20 s at 20 m/s),
+Which samples (decision): the paper's numbers are over the whole run (400 m, 20 s at 20 m/s),
 so by default so are these, and the band-pass edges are *not* trimmed. The whole record is
 filtered with ``sosfiltfilt``'s default odd extension at both ends; ``skip_s`` drops the first
 seconds *after* filtering (the estimator's start-up transient), the band-pass still sees the
@@ -50,7 +50,7 @@ import math
 import numpy as np
 from scipy.signal import butter, sosfiltfilt
 
-#: EN 13848-1 wavelength ranges (m) for alignment, as quoted by seed 000 (§1, §5.3)
+#: EN 13848-1 wavelength ranges (m) for alignment, as quoted by Muñoz et al. (§1, §5.3)
 BANDS: dict[str, tuple[float, float]] = {"whole": (3.0, 200.0), "D1": (3.0, 25.0),
                                          "D2": (25.0, 70.0), "D3": (70.0, 200.0)}
 
@@ -116,12 +116,12 @@ def bandpass(x: np.ndarray, V: float, dt: float, band: str | tuple[float, float]
 
 def alignment_errors(estimate: np.ndarray, truth: np.ndarray, V: float, dt: float, skip_s: float = 0.0,
                      bands: dict[str, tuple[float, float]] | None = None, order: int = 4) -> dict:
-    """Seed eq. 32 per wavelength band: ``{"J_mm": {band: J in mm}, "J_rel": {band: J_rel}}``.
+    """Muñoz et al., eq. 32 per wavelength band: ``{"J_mm": {band: J in mm}, "J_rel": {band: J_rel}}``.
 
     ``estimate`` and ``truth``: the alignment (m), 1-D, same length, sampled every ``dt`` s at
     ``V`` m/s from the start of the run. Each band (default :data:`BANDS`) band-passes the whole
     records (:func:`bandpass`), then takes the rms over the samples at ``k dt >= skip_s``
-    (default 0: the whole run, as the seed). J_rel is nan where the band-passed truth is 0."""
+    (default 0: the whole run, as Muñoz et al.). J_rel is nan where the band-passed truth is 0."""
     est = np.asarray(estimate, dtype=float)
     true = np.asarray(truth, dtype=float)
     if est.ndim != 1 or est.shape != true.shape:

@@ -1,9 +1,9 @@
 r"""Online estimation of the secondary vertical stiffness ``k1`` of the ERRI B176 coach
-(seed 004) from inertial signals and the known track input, and its fault metrics.
+(Onat et al. (2016)) from inertial signals and the known track input, and its fault metrics.
 
 Two observers share one design model:
 
-* :class:`SuspensionWLS`: the seed's scheme (eqs. 7-11), a linear Kalman filter on the 7-DOF
+* :class:`SuspensionWLS`: the paper's scheme (eqs. 7-11), a linear Kalman filter on the 7-DOF
   model at the current estimate ``theta`` plus a weighted-least-squares update of ``theta``
   from the filter's residuals;
 * :class:`SuspensionJoint`: joint estimation, an extended Kalman filter on the state
@@ -15,8 +15,8 @@ Design model (both)
 state; ``k1`` enters as a factor)::
 
     x = [z_c, theta_c, phi_c, z_b1, phi_b1, z_b2, phi_b2, dz_c, ..., dphi_b2]   (14, m / rad, m/s / rad/s)
-    dx/dt = (A0 + k1 A1) x + Bz w + Bd dw          (seed eqs. 2-5: T_k u + T_b u')
-    y     = (H0 + k1 H1) x + Du [w, dw]            (seed eq. 6: the 7 sensors of SENSORS)
+    dx/dt = (A0 + k1 A1) x + Bz w + Bd dw          (eqs. 2-5: T_k u + T_b u')
+    y     = (H0 + k1 H1) x + Du [w, dw]            (eq. 6: the 7 sensors of SENSORS)
 
 ``w = [z_l1, z_r1, z_l2, z_r2]`` are the rail heights under bogie 1 (leading) and bogie 2, ``dw``
 their rates. ``A0``, ``A1`` (and ``H0``, ``H1``) are exact: the model is affine in ``k1``, so
@@ -24,7 +24,7 @@ two linearisations (``k1`` = 0 and 1) give them. The sensor rows of ``H`` are th
 accelerations (``ddz_c``, ``ddz_b1``, ``ddz_b2``: they depend on ``k1`` and on the rails) and the
 gyro states (``dtheta_c``, ``dphi_c``, ``dphi_b1``, ``dphi_b2``).
 
-**Known track input**: the seed's filter propagates with ``G_b(theta) u' + G_k(theta) u``
+**Known track input**: the paper's filter propagates with ``G_b(theta) u' + G_k(theta) u``
 (eqs. 7-8) and takes the irregularity from a measured 3 km track section (§3), so both
 observers read the rail heights and rates as inputs, next to the seven sensors (in the
 experiment: the track FMU's outputs, as a track recording would give them).
@@ -39,14 +39,14 @@ gives ``x_{k+1} = F x_k + G [w_k, dw_k]`` exactly (checked against the FMU: 2e-1
 The rails are known inputs ``u`` (taken at each sample, held by the FMU's hold in between);
 a sample whose rails are missing is bridged by extrapolating the last rails with their rates.
 A missing sensor (NaN, or masked out) is left out of the update: both observers update with
-the rows present. The observers are designed for ``dt`` = the data's sample time (10 ms in seed 004 §3).
+the rows present. The observers are designed for ``dt`` = the data's sample time (10 ms in the paper, §3).
 
 Sensor noise levels
 -------------------
-Seed 004 gives no sensor noise levels: its ``R = I`` (§4) is a filter tuning, and as a noise
+Onat et al. (2016) give no sensor noise levels: its ``R = I`` (§4) is a filter tuning, and as a noise
 level (1 m/s2, 1 rad/s) it would be 10-1000 times the coach signals (ddz_c 0.05-0.1 m/s2,
 dphi_c 2-4e-3 rad/s, dtheta_c 1e-3 rad/s rms on ERRI B176 low level at 20 m/s). We use the
-"low cost inertial sensor" levels of seed 000 §5.3 (this project's other inertial study):
+"low cost inertial sensor" levels of Muñoz et al., §5.3 (this project's other inertial study):
 :data:`SENSOR_NOISE_STD`, 0.01 m/s2 for every accelerometer and 5e-4 rad/s for every gyro
 (white, per sample at 100 Hz).
 
@@ -76,13 +76,13 @@ _STATE_UNITS = tuple(s.unit for s in COACH_VERTICAL.states)
 _SENSOR_UNITS = {"ddz_c": "m/s2", "dtheta_c": "rad/s", "dphi_c": "rad/s", "ddz_b1": "m/s2",
                  "dphi_b1": "rad/s", "ddz_b2": "m/s2", "dphi_b2": "rad/s"}
 
-#: sensor noise standard deviation per channel (seed 000 §5.3 levels; see the module docstring)
+#: sensor noise standard deviation per channel (Muñoz et al., §5.3 levels; see the module docstring)
 SENSOR_NOISE_STD: dict[str, float] = {s: (0.01 if s.startswith("dd") else 5e-4) for s in SENSORS}
 
-#: seed 004 eq. 10: 70 % of the weight on ddz_c and dphi_c (35 % each), the rest equally
-SEED_WEIGHTS: dict[str, float] = {s: (0.35 if s in ("ddz_c", "dphi_c") else 0.06) for s in SENSORS}
+#: Onat et al. (2016), eq. 10: 70 % of the weight on ddz_c and dphi_c (35 % each), the rest equally
+ONAT2016_WEIGHTS: dict[str, float] = {s: (0.35 if s in ("ddz_c", "dphi_c") else 0.06) for s in SENSORS}
 
-K1_INITIAL = 330e3  # N/m, seed 004 §4: initial guess of k1
+K1_INITIAL = 330e3  # N/m, Onat et al. (2016), §4: initial guess of k1
 
 
 # -- design model ------------------------------------------------------------------------------
@@ -221,17 +221,17 @@ def suspension_metrics(t, k1_est, k1_true, fault_time: float | None = None,
     return out
 
 
-# -- (a) the seed's scheme ------------------------------------------------------------------
+# -- (a) the paper's scheme -----------------------------------------------------------------
 
 class SuspensionWLS(_CoachObserver):
-    r"""Seed 004's scheme: a linear Kalman filter on the 7-DOF model at the current
+    r"""The scheme of Onat et al. (2016): a linear Kalman filter on the 7-DOF model at the current
     ``theta = k1`` (eqs. 7-9) and the weighted-least-squares update ``theta_k = theta_{k-1} +
     beta J(theta)`` from the filter's residuals (eqs. 10-11).
 
     Measurements: the 7 sensors of :data:`models.coach_vertical.SENSORS` (ddz_c m/s2,
     dtheta_c, dphi_c rad/s, ddz_b1 m/s2, dphi_b1 rad/s, ddz_b2 m/s2, dphi_b2 rad/s). Known
     inputs: the rail heights ``z_l1, z_r1, z_l2, z_r2`` (m) and their rates ``dz_*`` (m/s), the
-    seed's known track input ``u``, ``u'``. Outputs: ``k1`` (N/m) and the 14 states (m, rad, m/s, rad/s).
+    paper's known track input ``u``, ``u'``. Outputs: ``k1`` (N/m) and the 14 states (m, rad, m/s, rad/s).
 
     Kalman filter (eqs. 7-9), with ``F(theta), G(theta)`` the exact discretisation of the
     design model (module docstring) at the current estimate::
@@ -240,14 +240,14 @@ class SuspensionWLS(_CoachObserver):
         r_k   = y_k - (H(theta) x^-_k + Du u_k)                 (the residual y_meas - y_model)
         K     = P^- H^T (H P^- H^T + R)^-1,  x^+ = x^- + K r,  P^+ Joseph form (filterpy)
 
-    Seed tuning (§4), kept: ``P0 = 0.01 I``, ``Q = 0.001 I``, ``R = I`` (settings ``p0``,
-    ``q``, ``r``; all in the state's / sensor's own units, as the seed gives them).
+    The paper's tuning (§4), kept: ``P0 = 0.01 I``, ``Q = 0.001 I``, ``R = I`` (settings ``p0``,
+    ``q``, ``r``; all in the state's / sensor's own units, as the paper gives them).
 
     Weighted least squares (eqs. 10-11), and how we read them. Taken literally, ``J`` is a
     weighted *sum of signed residuals*; but the residuals of a linear filter driven by a
     zero-mean track are zero-mean whatever the error in ``k1``, so that sum has no direction
     (``residual="literal"`` keeps this reading, ``theta += beta * mean(gamma . r / sigma)``:
-    on our noise-free 150 s it stays at the initial guess, 326-334 kN/m; with the seed's
+    on our noise-free 150 s it stays at the initial guess, 326-334 kN/m; with the paper's
     ``beta`` = 1.5e6 on raw residuals it random-walks to a negative k1 within seconds).
     A weighted least-squares estimate
     minimises ``sum_k sum_i gamma_i (r_ik / sigma_i)^2`` over ``theta``; linearised about the
@@ -262,24 +262,25 @@ class SuspensionWLS(_CoachObserver):
     ``w = dx/dtheta`` follows the filter (a recursive prediction-error sensitivity, the gain
     held): ``w^-_{k+1} = F w^+_k + g_k`` with ``g_k`` the response to ``k1_initial A1 x^+_k``
     held over the step, and ``w^+ = w^- - K s``. Through ``w`` the roll-rate residual carries
-    information about ``k1`` (it has no direct ``H1`` term), so the seed's weights act as it
+    information about ``k1`` (it has no direct ``H1`` term), so the paper's weights act as it
     describes. ``beta`` relaxes the Gauss-Newton step (``beta = 1``: jump to the window's
     least-squares value).
 
     Tuning and why:
 
-    * ``gamma`` (:data:`SEED_WEIGHTS`): the seed's, 35 % each on ddz_c and dphi_c, 6 % on each
+    * ``gamma`` (:data:`ONAT2016_WEIGHTS`): the paper's, 35 % each on ddz_c and dphi_c, 6 % on each
       of the other five. Residuals and sensitivities are divided by the sensor noise std
       ``sigma`` (:data:`SENSOR_NOISE_STD`): in raw units a weight on a roll rate (1e-3 rad/s)
       and one on an acceleration (0.1 m/s2) would not be comparable.
     * ``window`` n = 100 samples (1 s, about one period of the coach bounce and pitch modes,
       1.0 and 1.2 Hz): ``theta`` is updated once per window (``k`` of eq. 11 counts windows).
-    * ``beta`` = 0.3: the seed's 1.5e6 belongs to its unstated residual scaling and cannot be
-      transferred. Measured on 150 s of ERRI low-level track (seed tuning of the filter):
+    * ``beta`` = 0.3: the paper's 1.5e6 belongs to its unstated residual scaling and cannot be
+      transferred. Measured on 150 s of ERRI low-level track (the paper's tuning of the filter):
       noise-free, within 2 % of 430 kN/m after 9 s and within 5 % of 215 kN/m 9 s after the
-      fault; with the seed-000 noise it settles 2 % (static) to 5 % (after the fault) low.
+      fault; with the sensor noise (:data:`SENSOR_NOISE_STD`) it settles 2 % (static) to 5 %
+      (after the fault) low.
       0.1 is about 3 times slower and as biased; 0.5 is noisier.
-    * The filter keeps the seed's tuning (faithful). It is what limits the scheme under noise:
+    * The filter keeps the paper's tuning (faithful). It is what limits the scheme under noise:
       ``R = I`` is 1e4-1e6 times the sensor variance, so the residuals are barely filtered.
       With ``r = 1e-4, q = 1e-8`` (closer to the sensors) the same update ends within 0.5 %,
       converges in 9 s and detects the fault in 8 s (noisy data).
@@ -306,7 +307,7 @@ class SuspensionWLS(_CoachObserver):
         self.window = int(s["window"])
         if self.window < 1 or self.window != s["window"]:
             raise ValueError(f"SuspensionWLS: window must be a positive integer, not {s['window']!r}")
-        w = s["weights"] if s["weights"] is not None else SEED_WEIGHTS
+        w = s["weights"] if s["weights"] is not None else ONAT2016_WEIGHTS
         w = np.array([float(w[c]) for c in SENSORS]) if isinstance(w, dict) else np.asarray(w, float)
         if w.shape != (7,) or np.any(w < 0) or not w.sum() > 0:
             raise ValueError("SuspensionWLS: weights must be 7 non-negative numbers")
@@ -409,7 +410,7 @@ class SuspensionJoint(_CoachObserver):
     Not filterpy's ``ExtendedKalmanFilter``: its prediction is ``F x + B u`` and would have to
     be overridden anyway, and its update deep-copies each row.
 
-    Why it does better than the seed's scheme: ``theta`` gets the Kalman gain from its
+    Why it does better than the paper's scheme: ``theta`` gets the Kalman gain from its
     covariance with the states instead of a hand-tuned fixed step, so it is fast while
     uncertain (the start and a fault) and averages as evidence accumulates; every channel
     enters with its own noise level.
@@ -421,10 +422,10 @@ class SuspensionJoint(_CoachObserver):
     * ``q_theta`` = 1e-4 1/s: random-walk intensity of ``theta`` (1 % per sqrt(s)). It sets
       the trade-off between tracking a fault and the noise on the estimate: measured, a 50 %
       drop is within 5 % after about 1.5 s and the static estimate stays within about 1 %
-      with the seed-000 noise. 1e-5 halves the jitter but doubles the delay.
+      with the sensor noise of :data:`SENSOR_NOISE_STD`. 1e-5 halves the jitter but doubles the delay.
     * ``q_acc`` = 1e-8 m2/s3 (and rad2/s3) on the velocities: the design model is the
       simulated one, so only a small floor for numerical mismatch.
-    * ``P0``: ``theta`` 0.3 (30 % of the initial guess: the seed starts 23 % low), the
+    * ``P0``: ``theta`` 0.3 (30 % of the initial guess: the paper starts 23 % low), the
       positions 1e-3 (m, rad), the velocities 1e-2 (m/s, rad/s); the state starts at rest.
     * ``theta`` is kept >= ``theta_min`` (0.05) so the model stays stable.
 

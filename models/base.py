@@ -55,7 +55,7 @@ def _as_type(type_: str, v) -> float | int | bool:
 @dataclass
 class Variable:
     """An FMU variable. ``unit`` is an FMI unit name ('' = dimensionless); ``source`` says where
-    a parameter's value comes from (seed table, benchmark vehicle, standard)."""
+    a parameter's value comes from (a reference study's table, benchmark vehicle, standard)."""
 
     name: str
     description: str
@@ -115,7 +115,7 @@ class Model:
     states: list[State] = field(default_factory=list)
     outputs: list[Output] = field(default_factory=list)
     integrator_step: float = 1e-4  # s, default of the internal RK4 step parameter
-    # (start s, stop s, communication step s) for importers' defaults: seed 000's run,
+    # (start s, stop s, communication step s) for importers' defaults: the run of Muñoz et al.,
     # 20 s (400 m at 20 m/s) at 1 kHz
     default_experiment: tuple[float, float, float] = (0.0, 20.0, 1e-3)
     # the simulation ends at the first communication point where this holds (a sympy relation

@@ -1,9 +1,9 @@
 r"""Sensor noise: the inertial sensors of a monitoring system as a component of the co-simulation.
 
 The ``SensorNoise`` FMU turns up to eight true signals (accelerations, angular rates, ... from
-the vehicle FMUs) into measurements, as the synthetic sensor data of seed 000 (sec. 4.2 and 5:
-"contaminated with the Gaussian white noise of the sensors") and seed 004 (sec. 3, the noise
-r ~ N(0, R) of its measurement equation). Its C code is hand written
+the vehicle FMUs) into measurements, as the synthetic sensor data of Muñoz et al. (§4.2 and §5:
+"contaminated with the Gaussian white noise of the sensors") and Onat et al. (2016) (§3, the
+noise r ~ N(0, R) of its measurement equation). Its C code is hand written
 (``fmus/native/models/SensorNoise.c``); ``tests/test_sensors.py`` proves it equals this module bit for bit.
 
 Measurement equation
@@ -75,11 +75,11 @@ sigma_1..8     (u_i)  0       standard deviation of the white noise; presets bel
 gain_1..8      1      1       scale factor of the sensor (calibration error)
 bias_1..8      (u_i)  0       offset of the sensor
 seed           1      1       seed of the noise (Integer)
-sample_period  s      1e-3    sensor sample period: 1 kHz (seed 000 runs), 0.01 s (seed 004)
+sample_period  s      1e-3    sensor sample period: 1 kHz (Muñoz et al. runs), 0.01 s (Onat et al. 2016)
 enabled        --     true    false: y = u exactly (noise-free reference run)
 ============== ====== ======= =========================================================
 
-Presets (:data:`SEED000_SENSORS`, :data:`SEED004_SENSORS`) assign the channels of the two
+Presets (:data:`MUNOZ_SENSORS`, :data:`ONAT2016_SENSORS`) assign the channels of the two
 studies and give their sigmas.
 """
 
@@ -193,7 +193,7 @@ class SensorNoise:
 
 # ---- the model definition --------------------------------------------------------------------
 
-_SIGMA_SRC = "experiment (.ssv); seed 000 sec. 5: 0.01 m/s2 accelerometers, 0.0005 rad/s gyro"
+_SIGMA_SRC = "experiment (.ssv); Muñoz et al., §5: 0.01 m/s2 accelerometers, 0.0005 rad/s gyro"
 
 
 def _parameters() -> list[Parameter]:
@@ -210,10 +210,10 @@ def _parameters() -> list[Parameter]:
                   "", 1, type="Integer", source="choice"),
         Parameter("sample_period", "sensor sample period: the noise is held for this long (> 0)", "s",
                   1e-3, positive=True,
-                  source="1 kHz for seed 000 runs (our 20 s experiment at 1e-3 s); seed 004 sec. 3 "
-                         "uses 0.01 s"),
+                  source="1 kHz for Muñoz et al. runs (our 20 s experiment at 1e-3 s); Onat et al. (2016), "
+                         "§3 uses 0.01 s"),
         Parameter("enabled", "add the sensor model; false: y_i = u_i exactly", "", True, type="Boolean",
-                  source="choice; seed 000 sec. 5.4, Table 3: the 'without sensor noise' case"),
+                  source="choice; Muñoz et al., §5.4, Table 3: the 'without sensor noise' case"),
     ]
 
 
@@ -248,24 +248,24 @@ SENSORS = Model(
 
 # ---- presets -----------------------------------------------------------------------------------
 
-#: Seed 000 (lateral alignment, sec. 5 "sensor noise"): an axle-box accelerometer and yaw-rate
-#: gyro on the leading wheelset and an accelerometer on the bogie frame. The seed calls the
+#: Muñoz et al. (lateral alignment, §5 "sensor noise"): an axle-box accelerometer and yaw-rate
+#: gyro on the leading wheelset and an accelerometer on the bogie frame. The paper calls the
 #: values "variance" but gives them in m/s2 and rad/s, i.e. as standard deviations ("10 % of
 #: the maximum absolute value of the signals"). Channels 4..8 stay noise-free (sigma 0).
-#: 1 kHz: our seed 000 runs sample at 1e-3 s (the seed does not state its rate).
-SEED000_SENSORS: dict[str, float | int | bool] = {
+#: 1 kHz: our runs of this study sample at 1e-3 s (the paper does not state its rate).
+MUNOZ_SENSORS: dict[str, float | int | bool] = {
     "sample_period": 1e-3,
     "sigma_1": 0.01,    # m/s2, u_1 <- WheelsetLateral.ddy   (axle-box lateral accelerometer)
     "sigma_2": 0.0005,  # rad/s, u_2 <- WheelsetLateral.dpsi (axle-box yaw-rate gyro)
     "sigma_3": 0.01,    # m/s2, u_3 <- WheelsetLateral.ddy_f (bogie-frame lateral accelerometer)
 }
 
-#: Seed 004 (secondary vertical spring, sec. 3 eq. 6): seven inertial signals, in the seed's
-#: order (CoachVertical outputs/states), sampled at the seed's 10 ms discretisation step. The
-#: seed gives no sensor specification (only its filter's R = I, a tuning choice, not a
-#: sensor); we take seed 000's sensor class: 0.01 m/s2 for the accelerometers and
+#: Onat et al. (2016) (secondary vertical spring, §3, eq. 6): seven inertial signals, in the
+#: paper's order (CoachVertical outputs/states), sampled at the paper's 10 ms discretisation
+#: step. The paper gives no sensor specification (only its filter's R = I, a tuning choice, not
+#: a sensor); we take the sensor class of Muñoz et al.: 0.01 m/s2 for the accelerometers and
 #: 0.0005 rad/s for the gyros. Channel 8 is unused.
-SEED004_SENSORS: dict[str, float | int | bool] = {
+ONAT2016_SENSORS: dict[str, float | int | bool] = {
     "sample_period": 0.01,
     "sigma_1": 0.01,    # m/s2, u_1 <- CoachVertical.ddz_c    (car-body vertical accelerometer)
     "sigma_2": 0.0005,  # rad/s, u_2 <- CoachVertical.dtheta_c (car-body pitch-rate gyro)

@@ -9,13 +9,13 @@ Position and speed). It has no states; its C code is hand written
 
 Irregularity variables
 ----------------------
-As in seed 000 (eq. 1), with ``u_y``/``u_z`` the lateral/vertical deviation of the left
+As in Muñoz et al. (eq. 1), with ``u_y``/``u_z`` the lateral/vertical deviation of the left
 (``lr``) and right (``rr``) rail from its ideal position::
 
     alignment   xi_a  = (u_y^lr + u_y^rr) / 2        gauge  xi_g  = u_y^lr - u_y^rr = 0
     profile     xi_vp = (u_z^lr + u_z^rr) / 2        cross-level  xi_cl = u_z^lr - u_z^rr
 
-Gauge variation is zero (seed 000 sec. 5.1: "gauge is assumed to be constant"), so the
+Gauge variation is zero (Muñoz et al., §5.1: "gauge is assumed to be constant"), so the
 alignment is the lateral deviation of both rails. The cross-level channel is generated as
 an angle ``theta`` (rad), and the rails are ::
 
@@ -26,8 +26,8 @@ with ``b`` = ``half_contact_width``, half the distance between the contact point
 ERRI B176 spectra
 -----------------
 ERRI B176 ("German" high-speed track spectra; ORE B176 RP1, as quoted by Claus & Schiehlen,
-VSD 29 suppl. (1998) 538-552, which is seed 000 ref. [18], the method seed 000 uses to
-generate its irregularities) give one-sided PSDs in the spatial angular frequency
+VSD 29 suppl. (1998) 538-552, which is ref. [18] of Muñoz et al., the method that paper uses
+to generate its irregularities) give one-sided PSDs in the spatial angular frequency
 ``Omega`` (rad/m)::
 
     S_a(Omega) = A_a Oc^2 / ((Omega^2 + Or^2)(Omega^2 + Oc^2))                 m^2/(rad/m)
@@ -81,8 +81,8 @@ cosine sum itself; :meth:`TrackIrregularity.random_tabulated` mirrors the FMU.
 Deterministic components (all components add up)
 ------------------------------------------------
 * harmonic: ``A sin(2 pi s / lambda_h + phase)`` with ``A`` = ``harmonic_lateral_amplitude``
-  on the alignment and ``harmonic_vertical_amplitude`` on both rails (seed 000 sec. 5.5
-  case 2: 1 mm lateral at 15.66 m);
+  on the alignment and ``harmonic_vertical_amplitude`` on both rails (Muñoz et al.,
+  §5.5 case 2: 1 mm lateral at 15.66 m);
 * step: ``step_lateral`` on the alignment and ``step_vertical`` on both rails for
   ``s >= step_position``; its derivative is taken as 0 everywhere (the Dirac impulse at the
   step is ignored);
@@ -152,10 +152,10 @@ Parameters
 =========================== ======== ========= ==========================================
 name                        unit     default   source
 =========================== ======== ========= ==========================================
-V                           m/s      20        seed 000 sec. 5 (V = 20 m/s)
+V                           m/s      20        Muñoz et al., §5 (V = 20 m/s)
 s_start                     m        0         track position of the leading wheelset, t=0
 axle_position_1..4          m        0, 2.5,   ERRI B176 coach: bogie pivots 2 a1 = 19 m
-                                     19, 21.5  (seed 004 Table 1), bogie wheelbase 2.5 m
+                                     19, 21.5  (Onat et al. (2016), Table 1), bogie wheelbase 2.5 m
 psd_level                   (int)    1         0 none, 1 ERRI B176 low, 2 high
 psd_scale                   ""       1         amplitude factor
 psd_lateral_scale           ""       1         extra factor on the random alignment
@@ -164,10 +164,10 @@ lambda_min, lambda_max      m        1, 300    wavelength band of the random lin
 period_length               m        5000      L: the random profile repeats after it
 grid_step                   m        0.05      upper bound of the FMU's tabulation step
 seed                        (int)    1         SplitMix64 seed
-half_contact_width          m        0.75      b, seed 000 Table 1 (l, wheelset half width)
-harmonic_lateral_amplitude  m        0         seed 000 sec. 5.5 uses 1e-3
+half_contact_width          m        0.75      b, Muñoz et al., Table 1 (l, wheelset half width)
+harmonic_lateral_amplitude  m        0         Muñoz et al., §5.5 uses 1e-3
 harmonic_vertical_amplitude m        0
-harmonic_wavelength         m        20        seed 000 sec. 5.5 uses 15.66
+harmonic_wavelength         m        20        Muñoz et al., §5.5 uses 15.66
 harmonic_phase              rad      0
 step_lateral, step_vertical m        0
 step_position               m        100
@@ -672,7 +672,7 @@ class TrackIrregularity:
 # ---- the model definition ------------------------------------------------------------------
 
 def _axle_positions() -> list[Parameter]:
-    src = ("ERRI B176 coach: bogie pivot spacing 2 a1 = 19 m (seed 004 Table 1, a1 = 9.5 m), "
+    src = ("ERRI B176 coach: bogie pivot spacing 2 a1 = 19 m (Onat et al. (2016), Table 1, a1 = 9.5 m), "
            "bogie wheelbase 2.5 m")
     return [Parameter(f"axle_position_{i}", f"distance of wheelset {i} behind wheelset 1 along the track",
                       unit="m", start=x, source=src)
@@ -694,7 +694,7 @@ def _outputs() -> list[Output]:
     return out
 
 
-_B176 = "ERRI B176 / ORE B176 RP1 track spectra (Claus & Schiehlen 1998, seed 000 ref. [18])"
+_B176 = "ERRI B176 / ORE B176 RP1 track spectra (Claus & Schiehlen 1998, ref. [18] of Muñoz et al.)"
 
 TRACK = Model(
     identifier="TrackIrregularity",
@@ -702,7 +702,7 @@ TRACK = Model(
                 "phases), harmonic, step and measured profile",
     parameters=[
         Parameter("V", "vehicle speed along the track", unit="m/s", start=20.0, min=0.0,
-                  source="seed 000 sec. 5 (V = 20 m/s)"),
+                  source="Muñoz et al., §5 (V = 20 m/s)"),
         Parameter("s_start", "track position of wheelset 1 at time 0", unit="m", start=0.0,
                   source="choice"),
         *_axle_positions(),
@@ -712,10 +712,10 @@ TRACK = Model(
                   start=1.0, min=0.0, source="choice"),
         Parameter("psd_lateral_scale", "extra factor on the random alignment only (0: no random "
                   "alignment, e.g. a harmonic-only lateral case)", unit="", start=1.0, min=0.0,
-                  source="choice (seed 000 sec. 5.4-5.5 cases)"),
+                  source="choice (Muñoz et al., §5.4-5.5 cases)"),
         Parameter("psd_vertical_scale", "extra factor on the random vertical profile and cross-level "
                   "(0: no vertical irregularity; the alignment keeps its phases)", unit="", start=1.0,
-                  min=0.0, source="choice (seed 000 sec. 5.4, 'no vertical irregularities')"),
+                  min=0.0, source="choice (Muñoz et al., §5.4, 'no vertical irregularities')"),
         Parameter("lambda_min", "shortest wavelength of the random lines (> 0)", unit="m", start=1.0,
                   positive=True,
                   source="choice: covers EN 13848 band D1 (3-25 m) and vehicle response"),
@@ -731,14 +731,14 @@ TRACK = Model(
                   source="choice"),
         Parameter("half_contact_width", "b: half the distance between the wheel-rail contact points",
                   unit="m", start=0.75, positive=True,
-                  source="seed 000 Table 1 (l = 0.75 m); ERRI B176 b"),
+                  source="Muñoz et al., Table 1 (l = 0.75 m); ERRI B176 b"),
         Parameter("harmonic_lateral_amplitude", "amplitude of the harmonic alignment", unit="m",
-                  start=0.0, source="seed 000 sec. 5.5 case 2 uses 1e-3 m"),
+                  start=0.0, source="Muñoz et al., §5.5 case 2 uses 1e-3 m"),
         Parameter("harmonic_vertical_amplitude", "amplitude of the harmonic on both rails' heights",
                   unit="m", start=0.0, source="choice"),
         Parameter("harmonic_wavelength", "wavelength of the harmonic (> 0)", unit="m", start=20.0,
                   positive=True,
-                  source="choice; seed 000 sec. 5.5 uses 15.66 m"),
+                  source="choice; Muñoz et al., §5.5 uses 15.66 m"),
         Parameter("harmonic_phase", "phase of the harmonic at s = 0", unit="rad", start=0.0,
                   source="choice"),
         Parameter("step_lateral", "lateral step of the alignment at step_position", unit="m",

@@ -1,6 +1,6 @@
-"""Seed 000's alignment Kalman filter (estimators/alignment.py) on data from the real FMUs:
+"""The alignment Kalman filter of Muñoz et al. (estimators/alignment.py) on data from the real FMUs:
 TrackIrregularity -> WheelsetLateral, sensors without noise (the design model is the
-simulated model, so this is the filter's own accuracy, not the seed's CM validation)."""
+simulated model, so this is the filter's own accuracy, not the paper's CM validation)."""
 
 import time
 
@@ -58,7 +58,7 @@ def test_harmonic_alignment(harmonic):
 def test_erri_low_alignment(erri_low):
     """ERRI B176 low level, band 3-200 m (0.1-6.67 Hz at 20 m/s), after 2 s. Measured
     J = 0.31 mm, J_rel = 0.171 (D1 0.110, D2 0.169, D3 0.242); over the whole 20 s including
-    the start-up transient J_rel = 0.294. Seed 000 Table 2: 0.36 mm / 0.25 with its noisy
+    the start-up transient J_rel = 0.294. Muñoz et al., Table 2: 0.36 mm / 0.25 with its noisy
     sensors and its complete model; here noise-free and the design model is the simulated one."""
     t, Z, xi = erri_low
     kf = AlignmentKalmanFilter(DT, V=V)
@@ -102,7 +102,7 @@ def test_speed(erri_low):
     assert elapsed < 2.0
 
 
-# -- RTS smoother (offline; beyond the seed) ----------------------------------------------------
+# -- RTS smoother (offline; beyond the paper) ---------------------------------------------------
 
 @pytest.fixture(scope="module")
 def erri_low_smoothed(erri_low):
@@ -129,7 +129,7 @@ def test_smoother_forward_pass_is_run(erri_low, erri_low_smoothed):
 
 
 def test_smoother_beats_filter_erri_low(erri_low, erri_low_smoothed):
-    """J_rel in every EN 13848 band, over the whole 20 s (the seed's convention) and after
+    """J_rel in every EN 13848 band, over the whole 20 s (the paper's convention) and after
     2 s. Measured (J mm / J_rel), after 2 s: filter 3-200 m 0.308 / 0.171, D1 0.070 / 0.110,
     D2 0.144 / 0.169, D3 0.253 / 0.242; smoother 0.080 / 0.044, 0.002 / 0.004, 0.039 / 0.046,
     0.115 / 0.110. Whole 20 s: filter 0.533 / 0.294, 0.182 / 0.294, 0.296 / 0.318,

@@ -23,8 +23,8 @@ from fmus.cosim.system import Component, Connection, System
 from models.sensors import (
     GAMMA,
     N_CHANNELS,
-    SEED000_SENSORS,
-    SEED004_SENSORS,
+    MUNOZ_SENSORS,
+    ONAT2016_SENSORS,
     SENSORS,
     SensorNoise,
     channel_state,
@@ -281,8 +281,8 @@ def test_model_structure_declares_direct_feedthrough(sensors_fmu):
 # ---- presets and co-simulation ---------------------------------------------------------------
 
 @pytest.mark.parametrize("preset, channels, period", [
-    (SEED000_SENSORS, {1: 0.01, 2: 0.0005, 3: 0.01}, 1e-3),
-    (SEED004_SENSORS, {1: 0.01, 2: 5e-4, 3: 5e-4, 4: 0.01, 5: 5e-4, 6: 0.01, 7: 5e-4}, 0.01),
+    (MUNOZ_SENSORS, {1: 0.01, 2: 0.0005, 3: 0.01}, 1e-3),
+    (ONAT2016_SENSORS, {1: 0.01, 2: 5e-4, 3: 5e-4, 4: 0.01, 5: 5e-4, 6: 0.01, 7: 5e-4}, 0.01),
 ])
 def test_presets(sensors_fmu, preset, channels, period):
     names = {p.name for p in SENSORS.parameters}
@@ -300,7 +300,7 @@ def _system(fmu_dir, record):
         name="track_wheelset_sensors",
         components=[Component("track", fmu_dir / "TrackIrregularity.fmu", {"psd_level": 1, "seed": 3}),
                     Component("wheelset", fmu_dir / "WheelsetLateral.fmu", {}),
-                    Component("sensors", fmu_dir / "SensorNoise.fmu", dict(SEED000_SENSORS))],
+                    Component("sensors", fmu_dir / "SensorNoise.fmu", dict(MUNOZ_SENSORS))],
         connections=[Connection("track", "alignment_1", "wheelset", "xi"),
                      Connection("track", "alignment_rate_1", "wheelset", "xi_rate"),
                      Connection("wheelset", "ddy", "sensors", "u_1"),
@@ -310,7 +310,7 @@ def _system(fmu_dir, record):
 
 
 def test_in_a_cosimulation(fmu_dir):
-    """Seed 000's sensors on track -> wheelset: every master gives the same measurements
+    """The sensors of Muñoz et al. on track -> wheelset: every master gives the same measurements
     (counter-based noise), and y - sigma w is exactly the true signal recorded at the same
     communication point (the recorder samples after the inputs are handed over)."""
     rec = ["wheelset.ddy", "wheelset.dpsi", "wheelset.ddy_f", "sensors.y_1", "sensors.y_2", "sensors.y_3"]
@@ -319,11 +319,11 @@ def test_in_a_cosimulation(fmu_dir):
     for data in res.values():
         k = sample_index(data[:, 0], 0.0, 1e-3, 1e-3)
         for j, i in enumerate((1, 2, 3)):
-            sigma = SEED000_SENSORS[f"sigma_{i}"]
+            sigma = MUNOZ_SENSORS[f"sigma_{i}"]
             truth, y = data[:, 1 + j], data[:, 4 + j]
             assert np.array_equal(y, truth + sigma * noise(1, i, k)), i  # default seed 1
     ddy = res["jacobi"][:, 1]
-    assert np.ptp(ddy) > 10 * SEED000_SENSORS["sigma_1"]  # a signal well above the noise
+    assert np.ptp(ddy) > 10 * MUNOZ_SENSORS["sigma_1"]  # a signal well above the noise
 
 
 def test_unitless_inputs_accept_any_connection_in_an_ssd(fmu_dir, tmp_path):

@@ -1,15 +1,15 @@
-"""Secondary-stiffness estimation (seed 004, issue 5) on data from the real FMUs:
+"""Secondary-stiffness estimation (Onat et al. (2016), issue 5) on data from the real FMUs:
 TrackIrregularity (ERRI B176 low level, seed 1, V = 20 m/s, bogie pivots at 0 and 19 m) ->
 CoachVertical, with StepSource -> coach.k1 (430 kN/m, or 215 kN/m from t = 20 s), 10 ms steps.
 
-Sensor noise is added here with numpy (seeded; seed 000 §5.3 levels, SENSOR_NOISE_STD: 0.01
-m/s2 accelerometers, 5e-4 rad/s gyros); seed 004 states none. The default tests run 60 s
+Sensor noise is added here with numpy (seeded; the levels of Muñoz et al., §5.3, SENSOR_NOISE_STD:
+0.01 m/s2 accelerometers, 5e-4 rad/s gyros); Onat et al. (2016) state none. The default tests run 60 s
 (fault at 20 s), the slow one the full 150 s (3 km).
 
 Measured when written (150 s, noise seed 0; SuspensionJoint / SuspensionWLS):
 
 =================  ==================================  ==================================
-variant            SuspensionJoint                     SuspensionWLS (seed tuning)
+variant            SuspensionJoint                     SuspensionWLS (paper's tuning)
 =================  ==================================  ==================================
 static, noisy      rel 0.6 %, converged 1.0 s          rel 2.0 %, never within 2 % for good
 static, clean      rel 0, converged 0.08 s             rel 0, converged 9 s
@@ -180,7 +180,7 @@ def test_joint_step_fault(fault60, with_noise):
     assert m["rel_error_final"] <= 0.02
 
 
-# -- the seed's scheme (what it does, honestly) ---------------------------------------------------
+# -- the paper's scheme (what it does, honestly) --------------------------------------------------
 
 def test_wls_static(static60):
     """Moves from 330 toward 430 kN/m: noise-free within 1 % by the end (measured 9 s to
@@ -243,8 +243,8 @@ def test_settings_are_checked():
 @pytest.mark.slow
 @pytest.mark.parametrize("variant", ["static", "step_fault"])
 def test_full_150s(fmu_dir, variant):
-    """Seed §4 at full length (150 s = 3 km): targets of the improved estimator with and
-    without noise; the seed scheme's numbers printed next to them."""
+    """The paper's §4 at full length (150 s = 3 km): targets of the improved estimator with and
+    without noise; the numbers of the paper's scheme printed next to them."""
     final = K1 if variant == "static" else K1_FAULT
     fault = None if variant == "static" else FAULT_TIME
     t, Z, k1 = coach_signals(fmu_dir, final, 150.0)

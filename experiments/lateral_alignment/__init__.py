@@ -1,18 +1,17 @@
-"""Lateral track alignment from in-service inertial sensors (seed 000): Kalman filter and RTS smoother on the wheelset model, validated on the complete vehicle model.
+"""Lateral track alignment from in-service inertial sensors (Muñoz et al.): Kalman filter and RTS smoother on the wheelset model, validated on the complete vehicle model.
 
 The system is ``SystemStructure.ssd``: ERRI B176 lateral and vertical irregularities (400 m
 at 20 m/s) drive the complete vehicle model (VehicleLateral, 23 DOF); a SensorNoise FMU adds
-the seed's sensor noise to the leading wheelset's lateral acceleration and yaw rate and its
+the paper's sensor noise to the leading wheelset's lateral acceleration and yaw rate and its
 bogie frame's lateral acceleration; the alignment Kalman filter (estimators.alignment, the
-seed's eqs. 9-17 on the simplified model with the identified primary suspension) estimates
+paper's eqs. 9-17 on the simplified model with the identified primary suspension) estimates
 the alignment online, and the RTS smoother (an offline observer, run on the record after the
-run) offline. Variants: the conditions of seed
-Tables 2-4.
+run) offline. Variants: the conditions of the paper's Tables 2-4.
 
 Training and test track: the SM is identified (identify.py), the filter's q_xi and
 sigma_virtual are tuned and the smoother's own equivalent SM is fitted (tune.py; the observer
 ``smoother`` in the SSD) on track seed 1; the study is scored on track seed 39, whose
-band content is the closest to what seed 000's Table 2 implies (parameters/track.ssv). The
+band content is the closest to what the paper's Table 2 implies (parameters/track.ssv). The
 irregularities ramp in over the first 20 m (the track's run_in_length), and the scores start
 after it.
 """
@@ -32,9 +31,9 @@ DEFAULT_VARIANT = "standard"
 BANDS = ("whole", "D1", "D2", "D3")
 START_UP_S = 1.0  # s: the track's 20 m run-in (parameters/track.ssv); errors are scored after it
 
-# seed 000 Tables 2-4: J (mm) / J_rel per band (whole, D1, D2, D3); Table 4's case 2 only
+# Muñoz et al., Tables 2-4: J (mm) / J_rel per band (whole, D1, D2, D3); Table 4's case 2 only
 # as its text gives it (whole range), case 3 not printed in the text we have
-SEED_TABLE = {
+MUNOZ_TABLE = {
     "standard": [(0.36, 0.25), (0.21, 0.48), (0.22, 0.26), (0.18, 0.15)],
     "no_noise": [(0.34, 0.24), (0.21, 0.48), (0.21, 0.26), (0.13, 0.12)],
     "no_vertical": [(0.34, 0.24), (0.17, 0.40), (0.21, 0.26), (0.18, 0.16)],
@@ -55,8 +54,8 @@ ROLES = {  # where the SSD holds what the study reads
     "speed": parameter("track", "V"),
 }
 
-PLOTS = {  # seed Fig. 4: the three sensor signals (roles or signal names)
-    "sensors.png": ("Sensor signals (seed Fig. 4)",
+PLOTS = {  # Muñoz et al., Fig. 4: the three sensor signals (roles or signal names)
+    "sensors.png": ("Sensor signals (Muñoz et al., Fig. 4)",
                     [[("ddy", "axle-box lateral acc. (noisy)"), ("vehicle.ddy_w1", "noise-free")],
                      [("dpsi", "wheelset yaw rate (noisy)"), ("vehicle.dpsi_w1", "noise-free")],
                      [("ddy_f", "bogie-frame lateral acc. (noisy)"), ("vehicle.ddy_b1", "noise-free")]]),
@@ -106,7 +105,7 @@ def metrics(signals: dict, estimates: dict, base: dict, roles: dict) -> dict:
 
 
 def plots(signals: dict, estimates: dict, out: Path, metrics: dict, roles: dict) -> list[str]:
-    """Seed Figs. 5, 6 and 8: estimate and smoothed estimate over the real alignment along
+    """Figs. 5, 6 and 8 of Muñoz et al.: estimate and smoothed estimate over the real alignment along
     the track, per EN 13848 band, with the wheelset's lateral displacement."""
     from estimators.metrics import bandpass
     from experiments.plots import figure, x_axis
@@ -120,14 +119,15 @@ def plots(signals: dict, estimates: dict, out: Path, metrics: dict, roles: dict)
 
     mm = 1e3
     real, kf, rts = {"color": "k", "lw": 1.2}, {"color": "C1", "lw": 0.9}, {"color": "C0", "lw": 0.9}
-    files = [figure(out, "alignment.png", f"Alignment estimate, {metrics['variant']} (seed Figs. 5 and 8)", s,
+    files = [figure(out, "alignment.png", f"Alignment estimate, {metrics['variant']} (Muñoz et al., Figs. 5 and 8)", s,
                     s_label, [[("real alignment xi", mm * truth, "mm", real), ("Kalman filter", mm * est, "mm", kf),
                                ("RTS smoother", mm * smoothed, "mm", rts),
                                ("wheelset y (CM)", mm * np.asarray(signals[roles["wheelset_y"]]), "mm",
                                 {"color": "C2", "lw": 0.7, "alpha": 0.7})]],
                     width=10, legend_columns=4)]
     files.append(figure(out, "alignment_bands.png",
-                        "Alignment per EN 13848 band: D1 3-25 m, D2 25-70 m, D3 70-200 m (seed Fig. 6)", s, s_label,
+                        "Alignment per EN 13848 band: D1 3-25 m, D2 25-70 m, D3 70-200 m (Muñoz et al., Fig. 6)",
+                        s, s_label,
                         [[(f"real, {band}", mm * bandpass(truth, V, dt, band), "mm", real),
                           (f"filter, {band}", mm * bandpass(est, V, dt, band), "mm", kf),
                           (f"smoother, {band}", mm * bandpass(smoothed, V, dt, band), "mm", rts)]
@@ -167,33 +167,33 @@ def first_lateral_mode() -> tuple[float, float, str]:
 
 
 def report_md(metrics: dict) -> str:
-    L = ["## Alignment estimate: J (mm) / J_rel, band-passed per EN 13848 (seed eq. 32)", "",
+    L = ["## Alignment estimate: J (mm) / J_rel, band-passed per EN 13848 (Muñoz et al., eq. 32)", "",
          f"Estimate and real alignment are band-passed to each EN 13848 range (zero-phase Butterworth) "
          f"before J and J_rel are taken; scored after the first {metrics['scored_from_s']:g} s (the track's "
          "run-in, where the irregularities ramp in from zero). The observers' tables further down are of "
-         "the raw estimate (not band-passed): larger, and not comparable with the seed's.", "",
+         "the raw estimate (not band-passed): larger, and not comparable with the paper's.", "",
          "| | whole 3-200 m | D1 3-25 m | D2 25-70 m | D3 70-200 m |", "|---|---|---|---|---|",
          "| Kalman filter | " + " | ".join(_ours(metrics)) + " |",
          "| RTS smoother (its own equivalent SM) | "
          + " | ".join(_ours(metrics, "J_mm_smoothed", "J_rel_smoothed")) + " |",
          "| filter incl. start-up | " + " | ".join(_ours(metrics, "J_mm_including_start_up",
                                                          "J_rel_including_start_up")) + " |"]
-    seed = SEED_TABLE.get(metrics["variant"])
-    if seed:
-        L.append("| seed 000 | " + " | ".join("-" if c is None else _cell(*c) for c in seed) + " |")
+    paper = MUNOZ_TABLE.get(metrics["variant"])
+    if paper:
+        L.append("| Muñoz et al. | " + " | ".join("-" if c is None else _cell(*c) for c in paper) + " |")
     f1, zeta, what = first_lateral_mode()
     L += ["", f"Observability rank {metrics['observability_rank']} (of 7). Filter: "
           f"{metrics['estimator_seconds']:.3f} s wall for {metrics['simulated_seconds']:g} s of data "
-          f"(seed: 5.7 s in Matlab); smoother {metrics['smoother_seconds']:.3f} s. Alignment rms over "
+          f"(Muñoz et al.: 5.7 s in Matlab); smoother {metrics['smoother_seconds']:.3f} s. Alignment rms over "
           f"3-200 m: {metrics['alignment_rms_3_200_mm']:.2f} mm.", "",
           f"CM first lateral mode at 20 m/s: f1 = {f1:.3f} Hz (damping ratio {zeta:.2f}; {what}), "
-          f"resonance wavelength V/f1 = {20.0 / f1:.2f} m (seed: 1.277 Hz, 15.66 m)."]
+          f"resonance wavelength V/f1 = {20.0 / f1:.2f} m (Muñoz et al.: 1.277 Hz, 15.66 m)."]
     ident = identified()
     if ident:
-        L += ["", "## Identification of the SM's primary suspension against the CM (seed §3.4)", "",
+        L += ["", "## Identification of the SM's primary suspension against the CM (Muñoz et al., §3.4)", "",
               "| | kx [N/m] | cx [N s/m] | ky [N/m] | cy [N s/m] |", "|---|---|---|---|---|",
-              "| seed Table 1 (initial) | " + " | ".join(f"{ident['initial'][k]:.4g}" for k in ("kx", "cx", "ky", "cy"))
-              + " |",
+              "| Muñoz et al., Table 1 (initial) | "
+              + " | ".join(f"{ident['initial'][k]:.4g}" for k in ("kx", "cx", "ky", "cy")) + " |",
               "| identified | " + " | ".join(f"{ident[k]:.4g}" for k in ("kx", "cx", "ky", "cy")) + " |"]
         L += _fit_md(ident.get("fit", {}))
     tune = tuned()
@@ -231,22 +231,22 @@ def _fit_md(fit: dict) -> list[str]:
          "| | cost | J_ls (eq. 8) | " + " | ".join(f"NRMSE {c}" for c in channels) + " |",
          "|---|---|---|" + "---|" * len(channels)]
     for label, r in (("Muñoz et al., Table 1 (initial)", before), ("identified", after)):
-        j_ls = r.get("J_ls_eq8", r.get("J_ls_seed_eq8", float("nan")))  # the key's name before and after the sweep
-        L.append(f"| {label} | {r.get('cost', float('nan')):.4f} | {j_ls:.4g} | "
+        L.append(f"| {label} | {r.get('cost', float('nan')):.4f} | {r.get('J_ls_eq8', float('nan')):.4g} | "
                  + " | ".join(f"{r.get('nrmse', {}).get(c, float('nan')):.3f}" for c in channels) + " |")
     return L
 
 
 def table_md(table: dict[str, dict]) -> str:
-    """Seed Tables 2-4 layout: per condition, ours (filter and smoother) beside the seed's."""
+    """The layout of Tables 2-4 of Muñoz et al.: per condition, ours (filter and smoother) beside the paper's."""
     L = ["| condition | estimate | whole 3-200 m | D1 3-25 m | D2 25-70 m | D3 70-200 m |",
          "|---|---|---|---|---|---|"]
     for variant, m in table.items():
         L.append(f"| {variant} | filter | " + " | ".join(_ours(m)) + " |")
         L.append(f"| {variant} | smoother | " + " | ".join(_ours(m, "J_mm_smoothed", "J_rel_smoothed")) + " |")
-        seed = SEED_TABLE.get(variant)
-        if seed:
-            L.append(f"| {variant} | seed 000 | " + " | ".join("-" if c is None else _cell(*c) for c in seed) + " |")
+        paper = MUNOZ_TABLE.get(variant)
+        if paper:
+            L.append(f"| {variant} | Muñoz et al. | " + " | ".join("-" if c is None else _cell(*c) for c in paper)
+                     + " |")
     L += ["", "J in mm / J_rel, band-passed per EN 13848, scored after the track's 1 s (20 m) run-in. "
           "Filter wall time per 20 s run: "
           + ", ".join(f"{v} {m['estimator_seconds']:.2f} s" for v, m in table.items()) + "."]

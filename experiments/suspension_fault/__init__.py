@@ -1,11 +1,11 @@
-"""Secondary vertical suspension stiffness k1 of an ERRI B176 coach from inertial signals, with a step-change fault (seed 004).
+"""Secondary vertical suspension stiffness k1 of an ERRI B176 coach from inertial signals, with a step-change fault (Onat et al. (2016)).
 
 The system is ``SystemStructure.ssd``: ERRI B176 vertical track irregularity under both
 bogies -> the 7-DOF CoachVertical FMU, whose k1 input comes from a StepSource (the fault) ->
-a SensorNoise FMU (seven inertial signals) -> two observers: ``seed_wls`` (the seed's linear
+a SensorNoise FMU (seven inertial signals) -> two observers: ``paper_wls`` (the paper's linear
 KF + weighted least squares, eqs. 7-11) and ``improved`` (joint EKF on the state augmented
 with k1). Variants: ``static`` and ``step_fault`` (k1 to 50 % at 20 s), each also
-``_no_noise``; ``step_response`` is the seed's Fig. 2 (1 mm under both bogies at 1 s).
+``_no_noise``; ``step_response`` is the paper's Fig. 2 (1 mm under both bogies at 1 s).
 """
 
 from __future__ import annotations
@@ -17,10 +17,10 @@ import numpy as np
 from experiments.study_protocol import RunData, Study, observers_md, parameter, truth
 
 DEFAULT_VARIANT = "step_fault"
-ESTIMATORS = ("seed_wls", "improved")
-# seed 004 Fig. 3 read qualitatively: both scenarios converge to the true k1; the paper gives
+ESTIMATORS = ("paper_wls", "improved")
+# Fig. 3 of Onat et al. (2016) read qualitatively: both scenarios converge to the true k1; the paper gives
 # no numbers for the error or the delay, so the table shows ours beside its qualitative claim
-SEED_CLAIM = "converges to the true k1 (Fig. 3; no numbers given)"
+PAPER_CLAIM = "converges to the true k1 (Fig. 3; no numbers given)"
 
 ROLES = {  # where the SSD holds what the study reads
     "k1": truth("improved", "k1"),  # the stiffness the fault source sets
@@ -28,7 +28,7 @@ ROLES = {  # where the SSD holds what the study reads
     "fault_time": parameter("fault", "step_time"),
 }
 
-PLOTS = {  # seed 004 Fig. 2 is the step_response variant of this figure
+PLOTS = {  # Fig. 2 of Onat et al. (2016) is the step_response variant of this figure
     "coach_response.png": ("Coach and bogie bounce over the rail height under bogie 1 and 2",
                            [[("track.vertical_left_1", "rail under bogie 1"),
                              ("track.vertical_left_2", "rail under bogie 2"),
@@ -49,7 +49,7 @@ def _fault_time(roles: dict) -> float | None:
 
 
 def metrics(signals: dict, estimates: dict, base: dict, roles: dict) -> dict:
-    """``seed_wls`` and ``improved``: k1_true_final, k1_est_final, rel_error_final,
+    """``paper_wls`` and ``improved``: k1_true_final, k1_est_final, rel_error_final,
     convergence_time_s, and detection_delay_s when the variant has a fault."""
     from estimators.suspension import suspension_metrics
 
@@ -61,7 +61,7 @@ def metrics(signals: dict, estimates: dict, base: dict, roles: dict) -> dict:
 
 
 def plots(signals: dict, estimates: dict, out: Path, metrics: dict, roles: dict) -> list[str]:
-    """Seed 004 Fig. 3 (both k1 estimates and the true k1 over time); for ``step_response``
+    """Fig. 3 of Onat et al. (2016) (both k1 estimates and the true k1 over time); for ``step_response``
     also Fig. 2 (the first 10 s of the 1 mm step under both bogies)."""
     from experiments.plots import figure
 
@@ -74,12 +74,12 @@ def plots(signals: dict, estimates: dict, out: Path, metrics: dict, roles: dict)
                    ("coach.z_c", "coach bounce z_c", {"color": "C0", "lw": 1.2}),
                    ("coach.z_b2", "bogie 2 bounce z_b2", {"color": "C1", "lw": 1.2}))]
         files.append(figure(out, "step_response.png", "1 mm vertical step under both bogies at t = 1 s "
-                            "(seed 004 Fig. 2)", ts[:n], "time [s]", [curves]))
+                            "(Fig. 2 of Onat et al. (2016))", ts[:n], "time [s]", [curves]))
     curves = [("true k1", np.asarray(signals[roles["k1"]]) / 1e3, "kN/m", {"color": "k", "lw": 1.5})]
     curves += [(f"{name} estimate", np.asarray(estimates[f"{name}.k1"]) / 1e3, "kN/m", {"color": c, "lw": 1})
                for name, c in zip(ESTIMATORS, ("C1", "C0")) if f"{name}.k1" in estimates]
     files.append(figure(out, "k1_estimates.png", "Secondary vertical stiffness: estimates and truth "
-                        "(seed 004 Fig. 3)", ts, "time [s]", [curves]))
+                        "(Fig. 3 of Onat et al. (2016))", ts, "time [s]", [curves]))
     return files
 
 
@@ -105,19 +105,19 @@ def report_md(metrics: dict) -> str:
 
 
 def table_md(table: dict[str, dict]) -> str:
-    """The study table: every variant, both estimators side by side, and the seed's claim."""
-    L = [f"| variant | estimator | {COLUMNS} | seed 004 |", "|---|---|---|---|---|---|---|---|"]
+    """The study table: every variant, both estimators side by side, and the paper's claim."""
+    L = [f"| variant | estimator | {COLUMNS} | Onat et al. (2016) |", "|---|---|---|---|---|---|---|---|"]
     for variant, m in table.items():
-        L += [f"| {variant} | {name} | {_cells(m[name])} | {SEED_CLAIM if name == 'seed_wls' else ''} |"
+        L += [f"| {variant} | {name} | {_cells(m[name])} | {PAPER_CLAIM if name == 'paper_wls' else ''} |"
               for name in ESTIMATORS if m.get(name)]
     L += ["", "Targets for `improved`: rel. error final <= 0.02 in every variant, convergence <= 20 s in "
-          "`static`, detection delay <= 5 s in `step_fault`. `step_response` is seed 004 Fig. 2 "
+          "`static`, detection delay <= 5 s in `step_fault`. `step_response` is Fig. 2 of Onat et al. (2016) "
           "(no estimation target)."]
     return "\n".join(L)
 
 
 class SuspensionFault(Study):
-    """Onat et al. (2016): k1 of an ERRI B176 coach by the seed's KF + WLS and by a joint EKF."""
+    """Onat et al. (2016): k1 of an ERRI B176 coach by the paper's KF + WLS and by a joint EKF."""
     default_variant = DEFAULT_VARIANT
     roles = ROLES
     figures_of_signals = PLOTS

@@ -1,4 +1,4 @@
-"""Track irregularity FMU driving the wheelset + suspended-frame lateral model (seed 000 §3.3).
+"""Track irregularity FMU driving the wheelset + suspended-frame lateral model (Muñoz et al., §3.3).
 
 The system is ``SystemStructure.ssd``: the track's alignment under the leading wheelset and
 its rate feed the wheelset model; an alignment Kalman filter (estimators.alignment) observes
