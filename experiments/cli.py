@@ -1,4 +1,4 @@
-"""railfmu command line (contract in DESIGN.md "Command line").
+"""railfmu command line (contract in docs/architecture.md, "Command line").
 
 Every user error (missing file, bad parameter, bad --set) is one line on stderr and exit
 code 2; no traceback.

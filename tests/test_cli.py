@@ -1,5 +1,5 @@
 """The railfmu command line: the main job's outputs through every master, and one-line errors
-with exit code 2 for every kind of bad input (DESIGN.md "Command line")."""
+with exit code 2 for every kind of bad input (docs/architecture.md, "Command line")."""
 
 import csv
 import json
