@@ -101,11 +101,11 @@ def test_ssd_settings_are_the_tuned_ones(fmu_dir):
 def test_study_table_sets_the_papers_row_under_ours():
     """table_md: per condition the filter and smoother rows, then Muñoz et al.'s Tables 2-4 row
     (none for a condition the paper does not print)."""
-    from experiments.lateral_alignment import table_md
+    from experiments.lateral_alignment import STUDY
 
     band = dict.fromkeys(BANDS, 0.1)
     m = {"J_mm": band, "J_rel": band, "J_mm_smoothed": band, "J_rel_smoothed": band, "estimator_seconds": 0.5}
-    lines = table_md({"standard": m, "resonance_case2": m, "harmonic": m}).splitlines()
+    lines = STUDY.table_md({"standard": m, "resonance_case2": m, "harmonic": m}).splitlines()
     assert "| standard | Muñoz et al. | 0.36 / 0.25 | 0.21 / 0.48 | 0.22 / 0.26 | 0.18 / 0.15 |" in lines
     assert "| resonance_case2 | Muñoz et al. | 0.21 / 0.29 | - | - | - |" in lines
     assert not [x for x in lines if x.startswith("| harmonic | Muñoz")]

@@ -47,10 +47,10 @@ def test_reduced_run_meets_the_improved_targets(tmp_path, variant):
 
 def test_study_table_sets_the_papers_claim_beside_its_scheme():
     """table_md: the last column is headed by the paper and holds its claim on the paper_wls rows only."""
-    from experiments.suspension_fault import PAPER_CLAIM, table_md
+    from experiments.suspension_fault import PAPER_CLAIM, STUDY
 
     e = {"k1_true_final": 430e3, "k1_est_final": 425e3, "rel_error_final": -0.0116, "convergence_time_s": 9.0}
-    md = table_md({"static": {"paper_wls": e, "improved": e}})
+    md = STUDY.table_md({"static": {"paper_wls": e, "improved": e}})
     assert md.splitlines()[0].endswith("| Onat et al. (2016) |")
     assert f"| static | paper_wls | 430 | 425 | -0.0116 | 9 | - | {PAPER_CLAIM} |" in md.splitlines()
     assert "| static | improved | 430 | 425 | -0.0116 | 9 | - |  |" in md.splitlines()

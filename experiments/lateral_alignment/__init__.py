@@ -77,64 +77,6 @@ def tuned() -> dict:
     return _beside("tuned.json")
 
 
-def metrics(signals: dict, estimates: dict, base: dict, roles: dict) -> dict:
-    """J_mm / J_rel per band for the filter (online estimate) and the smoother (the offline
-    observer ``smoother``, run by the bank after the run), the observability rank, and the
-    estimators' wall time on the recorded 20 s."""
-    from estimators.metrics import alignment_errors
-
-    dt = base["step_size_s"]
-    V = float(roles["speed"])
-    truth = np.asarray(signals[roles["alignment"]])
-    online = np.asarray(estimates["alignment.xi"])
-    kf = base["observers"]["alignment"]  # the online filter's diagnostics, timed by the bank
-    smoother = base["observers"]["smoother"]  # the offline observer's diagnostics
-    f = alignment_errors(online, truth, V, dt, skip_s=START_UP_S)
-    s = alignment_errors(np.asarray(estimates["smoother.xi"]), truth, V, dt, skip_s=START_UP_S)
-    whole_run = alignment_errors(online, truth, V, dt)
-    return {
-        "J_mm": f["J_mm"], "J_rel": f["J_rel"],
-        "J_mm_smoothed": s["J_mm"], "J_rel_smoothed": s["J_rel"],
-        "J_mm_including_start_up": whole_run["J_mm"], "J_rel_including_start_up": whole_run["J_rel"],
-        "scored_from_s": START_UP_S,
-        "observability_rank": int(kf["observability_rank"]),
-        "observability_rank_smoother_model": int(smoother["observability_rank"]),
-        "estimator_seconds": kf["wall_time_s"], "smoother_seconds": smoother["wall_time_s"],
-        "alignment_rms_3_200_mm": float(f["J_mm"]["whole"] / f["J_rel"]["whole"]),
-    }
-
-
-def plots(signals: dict, estimates: dict, out: Path, metrics: dict, roles: dict) -> list[str]:
-    """Figs. 5, 6 and 8 of Muñoz et al.: estimate and smoothed estimate over the real alignment along
-    the track, per EN 13848 band, with the wheelset's lateral displacement."""
-    from estimators.metrics import bandpass
-    from experiments.plots import figure, x_axis
-
-    dt = metrics["step_size_s"]
-    V = float(roles["speed"])
-    s, s_label = x_axis(signals, roles["position"])
-    truth = np.asarray(signals[roles["alignment"]])
-    est = np.asarray(estimates["alignment.xi"])
-    smoothed = np.asarray(estimates["smoother.xi"])  # the offline observer's (estimates_smoother.csv)
-
-    mm = 1e3
-    real, kf, rts = {"color": "k", "lw": 1.2}, {"color": "C1", "lw": 0.9}, {"color": "C0", "lw": 0.9}
-    files = [figure(out, "alignment.png", f"Alignment estimate, {metrics['variant']} (Muñoz et al., Figs. 5 and 8)", s,
-                    s_label, [[("real alignment xi", mm * truth, "mm", real), ("Kalman filter", mm * est, "mm", kf),
-                               ("RTS smoother", mm * smoothed, "mm", rts),
-                               ("wheelset y (CM)", mm * np.asarray(signals[roles["wheelset_y"]]), "mm",
-                                {"color": "C2", "lw": 0.7, "alpha": 0.7})]],
-                    width=10, legend_columns=4)]
-    files.append(figure(out, "alignment_bands.png",
-                        "Alignment per EN 13848 band: D1 3-25 m, D2 25-70 m, D3 70-200 m (Muñoz et al., Fig. 6)",
-                        s, s_label,
-                        [[(f"real, {band}", mm * bandpass(truth, V, dt, band), "mm", real),
-                          (f"filter, {band}", mm * bandpass(est, V, dt, band), "mm", kf),
-                          (f"smoother, {band}", mm * bandpass(smoothed, V, dt, band), "mm", rts)]
-                         for band in ("D1", "D2", "D3")], width=10, legend_columns=3))
-    return files
-
-
 def _cell(j, r) -> str:
     return "-" if j is None else f"{j:.2f} / {r:.2f}"
 
@@ -166,59 +108,6 @@ def first_lateral_mode() -> tuple[float, float, str]:
     return mode
 
 
-def report_md(metrics: dict) -> str:
-    L = ["## Alignment estimate: J (mm) / J_rel, band-passed per EN 13848 (Muñoz et al., eq. 32)", "",
-         f"Estimate and real alignment are band-passed to each EN 13848 range (zero-phase Butterworth) "
-         f"before J and J_rel are taken; scored after the first {metrics['scored_from_s']:g} s (the track's "
-         "run-in, where the irregularities ramp in from zero). The observers' tables further down are of "
-         "the raw estimate (not band-passed): larger, and not comparable with the paper's.", "",
-         "| | whole 3-200 m | D1 3-25 m | D2 25-70 m | D3 70-200 m |", "|---|---|---|---|---|",
-         "| Kalman filter | " + " | ".join(_ours(metrics)) + " |",
-         "| RTS smoother (its own equivalent SM) | "
-         + " | ".join(_ours(metrics, "J_mm_smoothed", "J_rel_smoothed")) + " |",
-         "| filter incl. start-up | " + " | ".join(_ours(metrics, "J_mm_including_start_up",
-                                                         "J_rel_including_start_up")) + " |"]
-    paper = MUNOZ_TABLE.get(metrics["variant"])
-    if paper:
-        L.append("| Muñoz et al. | " + " | ".join("-" if c is None else _cell(*c) for c in paper) + " |")
-    f1, zeta, what = first_lateral_mode()
-    L += ["", f"Observability rank {metrics['observability_rank']} (of 7). Filter: "
-          f"{metrics['estimator_seconds']:.3f} s wall for {metrics['simulated_seconds']:g} s of data "
-          f"(Muñoz et al.: 5.7 s in Matlab); smoother {metrics['smoother_seconds']:.3f} s. Alignment rms over "
-          f"3-200 m: {metrics['alignment_rms_3_200_mm']:.2f} mm.", "",
-          f"CM first lateral mode at 20 m/s: f1 = {f1:.3f} Hz (damping ratio {zeta:.2f}; {what}), "
-          f"resonance wavelength V/f1 = {20.0 / f1:.2f} m (Muñoz et al.: 1.277 Hz, 15.66 m)."]
-    ident = identified()
-    if ident:
-        L += ["", "## Identification of the SM's primary suspension against the CM (Muñoz et al., §3.4)", "",
-              "| | kx [N/m] | cx [N s/m] | ky [N/m] | cy [N s/m] |", "|---|---|---|---|---|",
-              "| Muñoz et al., Table 1 (initial) | "
-              + " | ".join(f"{ident['initial'][k]:.4g}" for k in ("kx", "cx", "ky", "cy")) + " |",
-              "| identified | " + " | ".join(f"{ident[k]:.4g}" for k in ("kx", "cx", "ky", "cy")) + " |"]
-        L += _fit_md(ident.get("fit", {}))
-    tune = tuned()
-    if tune:
-        f, sm = tune["filter"], tune["smoother"]
-        L += ["", "## Filter tuning and the smoother's model, on the training track (tune.py)", "",
-              f"Track seed {tune['training_track']['seed']}, sensor noise seed {tune['training_noise_seed']} "
-              f"(this run: track seed {metrics['parameters']['track'].get('seed')}, noise seed "
-              f"{metrics['parameters']['sensors'].get('seed')}), variant {tune['variant']}. Filter: q_xi = "
-              f"{f['q_xi']:g} m^2/s, sigma_virtual = {f['sigma_virtual']:g} m ({f['criterion']}).", "",
-              "| q_xi [m^2/s] | sigma_virtual [m] | whole | D1 | D2 | D3 | mean |", "|---|---|---|---|---|---|---|"]
-        L += [f"| {g['q_xi']:g} | {g['sigma_virtual']:g} | " + " | ".join(f"{g['J_rel'][b]:.3f}" for b in BANDS)
-              + f" | {g['mean_J_rel']:.3f} |" for g in f["grid"]]
-        keys = list(sm["parameters"])
-        L += ["", f"Smoother: the SM's equivalent parameters fitted to its accuracy ({sm['criterion']}; "
-              f"{sm['evaluations']} evaluations). Training J_rel (whole, D1, D2, D3) before "
-              + ", ".join(f"{sm['J_rel_before'][b]:.3f}" for b in BANDS) + "; after "
-              + ", ".join(f"{sm['J_rel_after'][b]:.3f}" for b in BANDS) + ".", "",
-              "| | " + " | ".join(keys) + " |", "|---|" + "---|" * len(keys),
-              "| filter's SM (identified) | " + " | ".join(f"{sm['initial'][k]:.4g}" for k in keys) + " |",
-              "| smoother's SM (fitted) | " + " | ".join(f"{sm['parameters'][k]:.4g}" for k in keys) + " |"]
-    raw = observers_md(metrics)
-    return "\n".join(L + (["", raw] if raw else []))
-
-
 def _fit_md(fit: dict) -> list[str]:
     """identify.py's fit record as a table: the cost and each channel's NRMSE before and after."""
     if not fit:
@@ -236,23 +125,6 @@ def _fit_md(fit: dict) -> list[str]:
     return L
 
 
-def table_md(table: dict[str, dict]) -> str:
-    """The layout of Tables 2-4 of Muñoz et al.: per condition, ours (filter and smoother) beside the paper's."""
-    L = ["| condition | estimate | whole 3-200 m | D1 3-25 m | D2 25-70 m | D3 70-200 m |",
-         "|---|---|---|---|---|---|"]
-    for variant, m in table.items():
-        L.append(f"| {variant} | filter | " + " | ".join(_ours(m)) + " |")
-        L.append(f"| {variant} | smoother | " + " | ".join(_ours(m, "J_mm_smoothed", "J_rel_smoothed")) + " |")
-        paper = MUNOZ_TABLE.get(variant)
-        if paper:
-            L.append(f"| {variant} | Muñoz et al. | " + " | ".join("-" if c is None else _cell(*c) for c in paper)
-                     + " |")
-    L += ["", "J in mm / J_rel, band-passed per EN 13848, scored after the track's 1 s (20 m) run-in. "
-          "Filter wall time per 20 s run: "
-          + ", ".join(f"{v} {m['estimator_seconds']:.2f} s" for v, m in table.items()) + "."]
-    return "\n".join(L)
-
-
 class LateralAlignment(Study):
     """Muñoz et al.: the alignment filter and smoother on the complete vehicle model."""
     default_variant = DEFAULT_VARIANT
@@ -262,16 +134,131 @@ class LateralAlignment(Study):
     summary_metrics = ("J_mm.*", "J_rel.*", "J_mm_smoothed.*", "J_rel_smoothed.*", "estimator_seconds")
 
     def metrics(self, run: RunData) -> dict:
-        return metrics(run.signals, run.estimates, run.base, run.roles)
+        """J_mm / J_rel per band for the filter (online estimate) and the smoother (the offline
+        observer ``smoother``, run by the bank after the run), the observability rank, and the
+        estimators' wall time on the recorded 20 s."""
+        signals, estimates, base, roles = run.signals, run.estimates, run.base, run.roles
+        from estimators.metrics import alignment_errors
+
+        dt = base["step_size_s"]
+        V = float(roles["speed"])
+        truth = np.asarray(signals[roles["alignment"]])
+        online = np.asarray(estimates["alignment.xi"])
+        kf = base["observers"]["alignment"]  # the online filter's diagnostics, timed by the bank
+        smoother = base["observers"]["smoother"]  # the offline observer's diagnostics
+        f = alignment_errors(online, truth, V, dt, skip_s=START_UP_S)
+        s = alignment_errors(np.asarray(estimates["smoother.xi"]), truth, V, dt, skip_s=START_UP_S)
+        whole_run = alignment_errors(online, truth, V, dt)
+        return {
+            "J_mm": f["J_mm"], "J_rel": f["J_rel"],
+            "J_mm_smoothed": s["J_mm"], "J_rel_smoothed": s["J_rel"],
+            "J_mm_including_start_up": whole_run["J_mm"], "J_rel_including_start_up": whole_run["J_rel"],
+            "scored_from_s": START_UP_S,
+            "observability_rank": int(kf["observability_rank"]),
+            "observability_rank_smoother_model": int(smoother["observability_rank"]),
+            "estimator_seconds": kf["wall_time_s"], "smoother_seconds": smoother["wall_time_s"],
+            "alignment_rms_3_200_mm": float(f["J_mm"]["whole"] / f["J_rel"]["whole"]),
+        }
 
     def figures(self, run: RunData, out: Path) -> list[str]:
-        return plots(run.signals, run.estimates, out, run.base, run.roles)
+        """Figs. 5, 6 and 8 of Muñoz et al.: estimate and smoothed estimate over the real alignment along
+        the track, per EN 13848 band, with the wheelset's lateral displacement."""
+        signals, estimates, metrics, roles = run.signals, run.estimates, run.base, run.roles
+        from estimators.metrics import bandpass
+        from experiments.plots import figure, x_axis
+
+        dt = metrics["step_size_s"]
+        V = float(roles["speed"])
+        s, s_label = x_axis(signals, roles["position"])
+        truth = np.asarray(signals[roles["alignment"]])
+        est = np.asarray(estimates["alignment.xi"])
+        smoothed = np.asarray(estimates["smoother.xi"])  # the offline observer's (estimates_smoother.csv)
+
+        mm = 1e3
+        real, kf, rts = {"color": "k", "lw": 1.2}, {"color": "C1", "lw": 0.9}, {"color": "C0", "lw": 0.9}
+        title = f"Alignment estimate, {metrics['variant']} (Muñoz et al., Figs. 5 and 8)"
+        files = [figure(out, "alignment.png", title, s, s_label,
+                        [[("real alignment xi", mm * truth, "mm", real), ("Kalman filter", mm * est, "mm", kf),
+                          ("RTS smoother", mm * smoothed, "mm", rts),
+                          ("wheelset y (CM)", mm * np.asarray(signals[roles["wheelset_y"]]), "mm",
+                           {"color": "C2", "lw": 0.7, "alpha": 0.7})]],
+                        width=10, legend_columns=4)]
+        files.append(figure(out, "alignment_bands.png",
+                            "Alignment per EN 13848 band: D1 3-25 m, D2 25-70 m, D3 70-200 m (Muñoz et al., Fig. 6)",
+                            s, s_label,
+                            [[(f"real, {band}", mm * bandpass(truth, V, dt, band), "mm", real),
+                              (f"filter, {band}", mm * bandpass(est, V, dt, band), "mm", kf),
+                              (f"smoother, {band}", mm * bandpass(smoothed, V, dt, band), "mm", rts)]
+                             for band in ("D1", "D2", "D3")], width=10, legend_columns=3))
+        return files
 
     def report_md(self, metrics: dict) -> str:
-        return report_md(metrics)
+        L = ["## Alignment estimate: J (mm) / J_rel, band-passed per EN 13848 (Muñoz et al., eq. 32)", "",
+             f"Estimate and real alignment are band-passed to each EN 13848 range (zero-phase Butterworth) "
+             f"before J and J_rel are taken; scored after the first {metrics['scored_from_s']:g} s (the track's "
+             "run-in, where the irregularities ramp in from zero). The observers' tables further down are of "
+             "the raw estimate (not band-passed): larger, and not comparable with the paper's.", "",
+             "| | whole 3-200 m | D1 3-25 m | D2 25-70 m | D3 70-200 m |", "|---|---|---|---|---|",
+             "| Kalman filter | " + " | ".join(_ours(metrics)) + " |",
+             "| RTS smoother (its own equivalent SM) | "
+             + " | ".join(_ours(metrics, "J_mm_smoothed", "J_rel_smoothed")) + " |",
+             "| filter incl. start-up | " + " | ".join(_ours(metrics, "J_mm_including_start_up",
+                                                             "J_rel_including_start_up")) + " |"]
+        paper = MUNOZ_TABLE.get(metrics["variant"])
+        if paper:
+            L.append("| Muñoz et al. | " + " | ".join("-" if c is None else _cell(*c) for c in paper) + " |")
+        f1, zeta, what = first_lateral_mode()
+        L += ["", f"Observability rank {metrics['observability_rank']} (of 7). Filter: "
+              f"{metrics['estimator_seconds']:.3f} s wall for {metrics['simulated_seconds']:g} s of data "
+              f"(Muñoz et al.: 5.7 s in Matlab); smoother {metrics['smoother_seconds']:.3f} s. Alignment rms over "
+              f"3-200 m: {metrics['alignment_rms_3_200_mm']:.2f} mm.", "",
+              f"CM first lateral mode at 20 m/s: f1 = {f1:.3f} Hz (damping ratio {zeta:.2f}; {what}), "
+              f"resonance wavelength V/f1 = {20.0 / f1:.2f} m (Muñoz et al.: 1.277 Hz, 15.66 m)."]
+        ident = identified()
+        if ident:
+            L += ["", "## Identification of the SM's primary suspension against the CM (Muñoz et al., §3.4)", "",
+                  "| | kx [N/m] | cx [N s/m] | ky [N/m] | cy [N s/m] |", "|---|---|---|---|---|",
+                  "| Muñoz et al., Table 1 (initial) | "
+                  + " | ".join(f"{ident['initial'][k]:.4g}" for k in ("kx", "cx", "ky", "cy")) + " |",
+                  "| identified | " + " | ".join(f"{ident[k]:.4g}" for k in ("kx", "cx", "ky", "cy")) + " |"]
+            L += _fit_md(ident.get("fit", {}))
+        tune = tuned()
+        if tune:
+            f, sm = tune["filter"], tune["smoother"]
+            L += ["", "## Filter tuning and the smoother's model, on the training track (tune.py)", "",
+                  f"Track seed {tune['training_track']['seed']}, sensor noise seed {tune['training_noise_seed']} "
+                  f"(this run: track seed {metrics['parameters']['track'].get('seed')}, noise seed "
+                  f"{metrics['parameters']['sensors'].get('seed')}), variant {tune['variant']}. Filter: q_xi = "
+                  f"{f['q_xi']:g} m^2/s, sigma_virtual = {f['sigma_virtual']:g} m ({f['criterion']}).", "",
+                  "| q_xi [m^2/s] | sigma_virtual [m] | whole | D1 | D2 | D3 | mean |", "|---|---|---|---|---|---|---|"]
+            L += [f"| {g['q_xi']:g} | {g['sigma_virtual']:g} | " + " | ".join(f"{g['J_rel'][b]:.3f}" for b in BANDS)
+                  + f" | {g['mean_J_rel']:.3f} |" for g in f["grid"]]
+            keys = list(sm["parameters"])
+            L += ["", f"Smoother: the SM's equivalent parameters fitted to its accuracy ({sm['criterion']}; "
+                  f"{sm['evaluations']} evaluations). Training J_rel (whole, D1, D2, D3) before "
+                  + ", ".join(f"{sm['J_rel_before'][b]:.3f}" for b in BANDS) + "; after "
+                  + ", ".join(f"{sm['J_rel_after'][b]:.3f}" for b in BANDS) + ".", "",
+                  "| | " + " | ".join(keys) + " |", "|---|" + "---|" * len(keys),
+                  "| filter's SM (identified) | " + " | ".join(f"{sm['initial'][k]:.4g}" for k in keys) + " |",
+                  "| smoother's SM (fitted) | " + " | ".join(f"{sm['parameters'][k]:.4g}" for k in keys) + " |"]
+        raw = observers_md(metrics)
+        return "\n".join(L + (["", raw] if raw else []))
 
     def table_md(self, table: dict[str, dict]) -> str:
-        return table_md(table)
+        """The layout of Tables 2-4 of Muñoz et al.: per condition, ours (filter and smoother) beside the paper's."""
+        L = ["| condition | estimate | whole 3-200 m | D1 3-25 m | D2 25-70 m | D3 70-200 m |",
+             "|---|---|---|---|---|---|"]
+        for variant, m in table.items():
+            L.append(f"| {variant} | filter | " + " | ".join(_ours(m)) + " |")
+            L.append(f"| {variant} | smoother | " + " | ".join(_ours(m, "J_mm_smoothed", "J_rel_smoothed")) + " |")
+            paper = MUNOZ_TABLE.get(variant)
+            if paper:
+                L.append(f"| {variant} | Muñoz et al. | " + " | ".join("-" if c is None else _cell(*c) for c in paper)
+                         + " |")
+        L += ["", "J in mm / J_rel, band-passed per EN 13848, scored after the track's 1 s (20 m) run-in. "
+              "Filter wall time per 20 s run: "
+              + ", ".join(f"{v} {m['estimator_seconds']:.2f} s" for v, m in table.items()) + "."]
+        return "\n".join(L)
 
 
 STUDY = LateralAlignment(__doc__.strip().splitlines()[0])

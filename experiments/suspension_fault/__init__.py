@@ -48,41 +48,6 @@ def _fault_time(roles: dict) -> float | None:
     return None
 
 
-def metrics(signals: dict, estimates: dict, base: dict, roles: dict) -> dict:
-    """``paper_wls`` and ``improved``: k1_true_final, k1_est_final, rel_error_final,
-    convergence_time_s, and detection_delay_s when the variant has a fault."""
-    from estimators.suspension import suspension_metrics
-
-    fault_time = _fault_time(roles)
-    t = np.asarray(estimates["time"])
-    k1_true = np.asarray(signals[roles["k1"]])[:len(t)]
-    return {name: suspension_metrics(t, estimates[f"{name}.k1"], k1_true, fault_time) for name in ESTIMATORS
-            if f"{name}.k1" in estimates}
-
-
-def plots(signals: dict, estimates: dict, out: Path, metrics: dict, roles: dict) -> list[str]:
-    """Fig. 3 of Onat et al. (2016) (both k1 estimates and the true k1 over time); for ``step_response``
-    also Fig. 2 (the first 10 s of the 1 mm step under both bogies)."""
-    from experiments.plots import figure
-
-    files = []
-    ts = np.asarray(signals["time"])
-    if metrics.get("variant") == "step_response":
-        n = np.searchsorted(ts, 10.0, side="right")
-        curves = [(label, 1e3 * np.asarray(signals[sig])[:n], "mm", style) for sig, label, style in
-                  (("track.vertical_left_1", "rail height (both bogies)", {"color": "k", "ls": "--", "lw": 1.2}),
-                   ("coach.z_c", "coach bounce z_c", {"color": "C0", "lw": 1.2}),
-                   ("coach.z_b2", "bogie 2 bounce z_b2", {"color": "C1", "lw": 1.2}))]
-        files.append(figure(out, "step_response.png", "1 mm vertical step under both bogies at t = 1 s "
-                            "(Fig. 2 of Onat et al. (2016))", ts[:n], "time [s]", [curves]))
-    curves = [("true k1", np.asarray(signals[roles["k1"]]) / 1e3, "kN/m", {"color": "k", "lw": 1.5})]
-    curves += [(f"{name} estimate", np.asarray(estimates[f"{name}.k1"]) / 1e3, "kN/m", {"color": c, "lw": 1})
-               for name, c in zip(ESTIMATORS, ("C1", "C0")) if f"{name}.k1" in estimates]
-    files.append(figure(out, "k1_estimates.png", "Secondary vertical stiffness: estimates and truth "
-                        "(Fig. 3 of Onat et al. (2016))", ts, "time [s]", [curves]))
-    return files
-
-
 def _fmt(x, scale=1.0, digits=3) -> str:
     return "-" if x is None else f"{x * scale:.{digits}g}"
 
@@ -98,24 +63,6 @@ def _cells(e: dict) -> str:
             f"{_fmt(e['rel_error_final'])} | {_fmt(e['convergence_time_s'])} | {_fmt(e.get('detection_delay_s'))}")
 
 
-def report_md(metrics: dict) -> str:
-    L = ["## k1 estimation", "", f"| estimator | {COLUMNS} |", "|---|---|---|---|---|---|"]
-    L += [f"| {name} | {_cells(metrics[name])} |" for name in ESTIMATORS if metrics.get(name)]
-    return "\n".join(L + ["", observers_md(metrics)])
-
-
-def table_md(table: dict[str, dict]) -> str:
-    """The study table: every variant, both estimators side by side, and the paper's claim."""
-    L = [f"| variant | estimator | {COLUMNS} | Onat et al. (2016) |", "|---|---|---|---|---|---|---|---|"]
-    for variant, m in table.items():
-        L += [f"| {variant} | {name} | {_cells(m[name])} | {PAPER_CLAIM if name == 'paper_wls' else ''} |"
-              for name in ESTIMATORS if m.get(name)]
-    L += ["", "Targets for `improved`: rel. error final <= 0.02 in every variant, convergence <= 20 s in "
-          "`static`, detection delay <= 5 s in `step_fault`. `step_response` is Fig. 2 of Onat et al. (2016) "
-          "(no estimation target)."]
-    return "\n".join(L)
-
-
 class SuspensionFault(Study):
     """Onat et al. (2016): k1 of an ERRI B176 coach by the paper's KF + WLS and by a joint EKF."""
     default_variant = DEFAULT_VARIANT
@@ -124,16 +71,55 @@ class SuspensionFault(Study):
     summary_metrics = ("*.k1_est_final", "*.rel_error_final", "*.convergence_time_s", "*.detection_delay_s")
 
     def metrics(self, run: RunData) -> dict:
-        return metrics(run.signals, run.estimates, run.base, run.roles)
+        """``paper_wls`` and ``improved``: k1_true_final, k1_est_final, rel_error_final,
+        convergence_time_s, and detection_delay_s when the variant has a fault."""
+        signals, estimates, roles = run.signals, run.estimates, run.roles
+        from estimators.suspension import suspension_metrics
+
+        fault_time = _fault_time(roles)
+        t = np.asarray(estimates["time"])
+        k1_true = np.asarray(signals[roles["k1"]])[:len(t)]
+        return {name: suspension_metrics(t, estimates[f"{name}.k1"], k1_true, fault_time) for name in ESTIMATORS
+                if f"{name}.k1" in estimates}
 
     def figures(self, run: RunData, out: Path) -> list[str]:
-        return plots(run.signals, run.estimates, out, run.base, run.roles)
+        """Fig. 3 of Onat et al. (2016) (both k1 estimates and the true k1 over time); for ``step_response``
+        also Fig. 2 (the first 10 s of the 1 mm step under both bogies)."""
+        signals, estimates, metrics, roles = run.signals, run.estimates, run.base, run.roles
+        from experiments.plots import figure
+
+        files = []
+        ts = np.asarray(signals["time"])
+        if metrics.get("variant") == "step_response":
+            n = np.searchsorted(ts, 10.0, side="right")
+            curves = [(label, 1e3 * np.asarray(signals[sig])[:n], "mm", style) for sig, label, style in
+                      (("track.vertical_left_1", "rail height (both bogies)", {"color": "k", "ls": "--", "lw": 1.2}),
+                       ("coach.z_c", "coach bounce z_c", {"color": "C0", "lw": 1.2}),
+                       ("coach.z_b2", "bogie 2 bounce z_b2", {"color": "C1", "lw": 1.2}))]
+            files.append(figure(out, "step_response.png", "1 mm vertical step under both bogies at t = 1 s "
+                                "(Fig. 2 of Onat et al. (2016))", ts[:n], "time [s]", [curves]))
+        curves = [("true k1", np.asarray(signals[roles["k1"]]) / 1e3, "kN/m", {"color": "k", "lw": 1.5})]
+        curves += [(f"{name} estimate", np.asarray(estimates[f"{name}.k1"]) / 1e3, "kN/m", {"color": c, "lw": 1})
+                   for name, c in zip(ESTIMATORS, ("C1", "C0")) if f"{name}.k1" in estimates]
+        files.append(figure(out, "k1_estimates.png", "Secondary vertical stiffness: estimates and truth "
+                            "(Fig. 3 of Onat et al. (2016))", ts, "time [s]", [curves]))
+        return files
 
     def report_md(self, metrics: dict) -> str:
-        return report_md(metrics)
+        L = ["## k1 estimation", "", f"| estimator | {COLUMNS} |", "|---|---|---|---|---|---|"]
+        L += [f"| {name} | {_cells(metrics[name])} |" for name in ESTIMATORS if metrics.get(name)]
+        return "\n".join(L + ["", observers_md(metrics)])
 
     def table_md(self, table: dict[str, dict]) -> str:
-        return table_md(table)
+        """The study table: every variant, both estimators side by side, and the paper's claim."""
+        L = [f"| variant | estimator | {COLUMNS} | Onat et al. (2016) |", "|---|---|---|---|---|---|---|---|"]
+        for variant, m in table.items():
+            L += [f"| {variant} | {name} | {_cells(m[name])} | {PAPER_CLAIM if name == 'paper_wls' else ''} |"
+                  for name in ESTIMATORS if m.get(name)]
+        L += ["", "Targets for `improved`: rel. error final <= 0.02 in every variant, convergence <= 20 s in "
+              "`static`, detection delay <= 5 s in `step_fault`. `step_response` is Fig. 2 of Onat et al. (2016) "
+              "(no estimation target)."]
+        return "\n".join(L)
 
 
 STUDY = SuspensionFault(__doc__.strip().splitlines()[0])
