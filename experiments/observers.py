@@ -171,6 +171,7 @@ class ObserverBank:
         self.times: list[float] = []
         self.estimates: list[np.ndarray] = []  # one (n_outputs_total,) row per recorded row
         self.results: dict[str, tuple[np.ndarray, np.ndarray]] = {}  # offline: name -> (t, X)
+        self._arrays: tuple[np.ndarray, np.ndarray] | None = None
 
     # the online observers, for plots and tables
     @property
@@ -207,6 +208,7 @@ class ObserverBank:
         self._record: list[np.ndarray] = []
         self._row = 0
         self.times, self.estimates, self.results = [], [], {}
+        self._arrays = None
         if self.recorder is not None:  # the same writer as signals.csv: complete rows, as it goes
             self.recorder.open(["time", *self.columns])
 
@@ -258,9 +260,14 @@ class ObserverBank:
                 rec.close(True)
 
     def arrays(self) -> tuple[np.ndarray, np.ndarray]:
-        """The online estimates: times and one row of every online observer's outputs."""
-        t = np.asarray(self.times)
-        return t, (np.vstack(self.estimates) if self.estimates else np.empty((0, len(self.columns))))
+        """The online estimates: times and one row of every online observer's outputs (stacked
+        once per number of rows: the runner and :meth:`metrics` both ask after a run)."""
+        cached = self._arrays
+        if cached is None or cached[0].shape[0] != len(self.times):
+            t = np.asarray(self.times)
+            self._arrays = cached = (t, np.vstack(self.estimates) if self.estimates
+                                     else np.empty((0, len(self.columns))))
+        return cached
 
     def offline_estimates(self) -> dict[str, np.ndarray]:
         """The offline estimates by column ``name.output`` (on their observer's sample times)."""
