@@ -79,6 +79,7 @@ __all__ = ["list_variants", "read_system", "validate_ssp", "write_ssp"]
 
 FMU_TYPE = "application/x-fmu-sharedlibrary"
 PARAMETER_SET = "application/x-ssp-parameter-set"
+RESOURCES = "resources/"  # SSP 1.0: an SSP's own files (FMUs, and any file a parameter names)
 RECORDER, OBSERVERS, EXPERIMENT, OSP = ("org.railfmu.recorder", "org.railfmu.observers",
                                         "org.railfmu.experiment", "com.opensimulationplatform")
 
@@ -421,7 +422,20 @@ class _Reader:
 
     def _set(self, comp: _Comp, v: ParamValue) -> None:
         var = self._settable(comp, v.name, v.where)
-        comp.params[var.name] = from_ssv(v, var, comp.units)
+        comp.params[var.name] = self._resource(var, from_ssv(v, var, comp.units), v.where)
+
+    def _resource(self, var, value, where: str):
+        """A String parameter whose value is a relative path under ``resources/`` names a
+        file of the SSP (a measured table, a track profile), as the SSD's FMU sources do: it
+        is resolved against the SSP root, and the FMU gets the absolute path (an FMU resolves
+        a relative one against its own ``resources/``, which the SSP's files are not in).
+        ``write_ssp`` bundles such files back into the archive's ``resources/``."""
+        if var.type != "String" or not isinstance(value, str) or not value.startswith(RESOURCES):
+            return value
+        path = self.root.resolve(value, where)
+        if not path.is_file():
+            raise UserError(f"{where}: {value} not found in the SSP ({self.root.show(path)})")
+        return str(path.resolve())
 
     def _variant(self, variant: str) -> None:
         file = Path(variant)
@@ -458,7 +472,8 @@ class _Reader:
                 raise UserError(f"--set {cname}.{first}: no component {cname!r}; {self.known()}")
             for name, value in values.items():
                 where = f"--set {cname}.{name}"
-                comp.params[name] = from_cli(value, self._settable(comp, name, where), where)
+                var = self._settable(comp, name, where)
+                comp.params[name] = self._resource(var, from_cli(value, var, where), where)
 
     # -- time ---------------------------------------------------------------------------------
     def _time(self, start, stop, step, need: bool):

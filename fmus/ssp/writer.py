@@ -6,8 +6,9 @@ What other importers need is kept explicit: every component carries ONE inline
 the step size is written as our ``rf:FixedStep``, as libcosim's ``osp:FixedStepAlgorithm``
 and as OMSimulator's fixed-step master (an ``org.openmodelica`` annotation, the FIRST of the
 system's annotations: OMSimulator 3.0 reads only the first ``ssc:Annotation`` of a system),
-and each connection's affine map is a ``ssc:LinearTransformation``. Reading the archive back
-gives an equal System (apart from paths).
+and each connection's affine map is a ``ssc:LinearTransformation``. A file that a String
+parameter names (a measured table) goes into ``resources/`` beside the FMUs. Reading the
+archive back gives an equal System (apart from paths).
 """
 
 from __future__ import annotations
@@ -40,7 +41,8 @@ def write_ssp(system: System, out: Path) -> Path:
     check_system(system)
     mds = {c.name: c.md for c in system.components}
     resources = _resource_names(system)
-    doc = _document(system, mds, resources)
+    files = _parameter_files(system, set(resources.values()))
+    doc = _document(system, mds, resources, files)
     problems = schema_problems(doc, "ssd", "SystemStructure.ssd")
     if problems:  # our own output: a bug, not a user error
         raise RuntimeError(f"write_ssp produced an invalid SSD: {problems[0]}")
@@ -52,6 +54,8 @@ def write_ssp(system: System, out: Path) -> Path:
                                                               pretty_print=True))
             for fmu, arcname in dict.fromkeys((Path(c.fmu), resources[c.name]) for c in system.components):
                 zf.write(fmu, arcname)
+            for path, arcname in files.items():
+                zf.write(path, arcname)
         os.replace(tmp, out)  # a reader never sees half an archive
     finally:
         tmp.unlink(missing_ok=True)
@@ -75,6 +79,28 @@ def _resource_names(system: System) -> dict[str, str]:
     return out
 
 
+def _parameter_files(system: System, taken: set[str]) -> dict[Path, str]:
+    """File -> 'resources/<file>' for every String parameter naming an existing file (a
+    measured table, a track profile): the archive carries it and the parameter names it
+    relative to the SSP root, which the reader resolves again (``resources/...``)."""
+    out: dict[Path, str] = {}
+    taken = set(taken)
+    for c in system.components:
+        for name, value in c.parameters.items():
+            if not (isinstance(value, str) and value and c.variables.get(name) is not None
+                    and c.variables[name].type == "String" and Path(value).is_absolute()
+                    and Path(value).is_file()):
+                continue
+            path = Path(value).resolve()
+            if path not in out:
+                arcname = f"resources/{path.name}"
+                if arcname in taken:
+                    arcname = f"resources/{c.name}_{name}_{path.name}"
+                out[path] = arcname
+                taken.add(arcname)
+    return out
+
+
 def _sub(parent, tag: str, **attrs):
     prefix, _, name = tag.partition(":")
     el = etree.SubElement(parent, f"{{{NS[prefix]}}}{name}")
@@ -88,7 +114,7 @@ def _num(x: float) -> str:
     return repr(float(x))  # shortest text that reads back to the same double
 
 
-def _document(system: System, mds: dict, resources: dict[str, str]):
+def _document(system: System, mds: dict, resources: dict[str, str], files: dict[Path, str]):
     nsmap = {"ssd": SSD_NS, "ssc": SSC_NS, "ssv": SSV_NS, "rf": RF_NS, "osp": OSP_NS, "oms": OMS_NS}
     doc = etree.Element(f"{{{SSD_NS}}}SystemStructureDescription", nsmap=nsmap, version="1.0",
                         name=system.name)
@@ -117,7 +143,7 @@ def _document(system: System, mds: dict, resources: dict[str, str]):
                 if v.type == "Real" and unit:
                     used_units[unit] = where
         if c.parameters:
-            _parameters(comp, c, {v.name: v for v in md.modelVariables})
+            _parameters(comp, c, {v.name: v for v in md.modelVariables}, files)
     if system.connections:
         conns = _sub(sys_el, "ssd:Connections")
         variables = {c.name: {v.name: v for v in mds[c.name].modelVariables} for c in system.components}
@@ -150,8 +176,9 @@ def _shown_variables(system: System) -> dict[str, set[str]]:
     return out
 
 
-def _parameters(comp_el, c, variables: dict) -> None:
-    """One inline parameter set with the component's final values (what libcosim reads)."""
+def _parameters(comp_el, c, variables: dict, files: dict[Path, str]) -> None:
+    """One inline parameter set with the component's final values (what libcosim reads);
+    a file a String parameter names is written as its place in the archive."""
     binding = _sub(_sub(comp_el, "ssd:ParameterBindings"), "ssd:ParameterBinding")
     pset = _sub(_sub(binding, "ssd:ParameterValues"), "ssv:ParameterSet", version="1.0", name=c.name)
     params = _sub(pset, "ssv:Parameters")
@@ -164,7 +191,8 @@ def _parameters(comp_el, c, variables: dict) -> None:
         elif t in ("Integer", "Enumeration"):
             _sub(p, "ssv:Integer", value=str(int(value)))
         elif t == "String":
-            _sub(p, "ssv:String", value=str(value))
+            bundled = files.get(Path(value).resolve()) if value and Path(value).is_absolute() else None
+            _sub(p, "ssv:String", value=bundled or str(value))
         else:
             _sub(p, "ssv:Real", value=_num(value), unit=var.unit if var is not None and var.unit else None)
 
