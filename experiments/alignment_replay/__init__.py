@@ -5,7 +5,10 @@ lateral acceleration ``ddy``, yaw rate ``dpsi``, frame lateral acceleration ``dd
 true alignment, as ``track_wheelset`` recorded them; ``record.py`` writes it) into the same
 alignment Kalman filter as ``track_wheelset``, and its RTS smoother offline. The table's end
 ends the run. A measured run replayed so gives the estimates of the simulated run bit for bit
-(``tests/test_replay.py``); swap in your own table as the SSD's description says.
+(``tests/test_replay.py``); swap in your own table as the SSD's description says. Variants
+(``variants/*.ssv``) change the observers, never the measured run: ``measured`` (the SSD as it
+is, the default) and ``conicity_minus10`` (the observers' conicity 10 % low, Muñoz et al.,
+Table 3).
 """
 
 from experiments.study_protocol import Study
@@ -20,7 +23,9 @@ PLOTS = {  # file -> (title, one list of (signal, label) per axis)
 
 
 class AlignmentReplay(Study):
-    """The alignment observers on a replayed measured run (no variants: the table is the run)."""
+    """The alignment observers on a replayed measured run; the study table is the default one
+    (each observer's raw error against the measured alignment, per variant)."""
+    default_variant = "measured"
     figures_of_signals = PLOTS
 
 
