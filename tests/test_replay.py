@@ -21,7 +21,9 @@ import pytest
 
 from estimators.alignment import AlignmentKalmanFilter
 from experiments.alignment_replay.record import COLUMNS, TABLE, table_from_signals
+from experiments.observers import ObserverBank
 from experiments.runner import run_experiment
+from fmus.cosim.masters import run as run_master
 from fmus.errors import UserError
 from fmus.ssp import read_system, write_ssp
 
@@ -112,18 +114,27 @@ def test_cli_runs_the_shipped_table_from_any_folder(shipped_run):
     assert "**Early end** at t = 3 s of 600 s" in (out / "report.md").read_text()
 
 
-def test_exported_ssp_carries_the_table_and_runs_to_the_same_estimates(shipped_run, tmp_path):
+def fmu_resources(ssp: Path, fmu: str) -> dict[str, bytes]:
+    """The resources/ of an FMU inside an .ssp archive."""
+    with zipfile.ZipFile(ssp) as outer, zipfile.ZipFile(io.BytesIO(outer.read(fmu))) as inner:
+        return {n.removeprefix("resources/"): inner.read(n) for n in inner.namelist()
+                if n.startswith("resources/") and not n.endswith("/")}
+
+
+def test_exported_ssp_carries_the_table_and_runs_to_the_same_estimates(shipped_run, tmp_path, fmu_dir):
+    """The table goes into the SignalTable FMU's own resources/ (which every importer hands
+    the FMU) and `file` names it relative to there: the archive alone runs, to the same files."""
     res, out = shipped_run
     assert res.returncode == 0, res.stderr
     ssp = tmp_path / "replay.ssp"
     res = railfmu("export", "alignment_replay", "-o", str(ssp))
     assert res.returncode == 0, res.stderr
     with zipfile.ZipFile(ssp) as zf:
-        assert sorted(zf.namelist()) == ["SystemStructure.ssd", "resources/SignalTable.fmu",
-                                         "resources/axlebox_run.csv"]
-        assert zf.read("resources/axlebox_run.csv") == TABLE.read_bytes()
+        assert sorted(zf.namelist()) == ["SystemStructure.ssd", "resources/SignalTable.fmu"]
         ssd = zf.read("SystemStructure.ssd").decode()
-    assert '<ssv:String value="resources/axlebox_run.csv"/>' in ssd and str(EXP) not in ssd
+    built = fmu_resources_of(fmu_dir / "SignalTable.fmu")
+    assert fmu_resources(ssp, "resources/SignalTable.fmu") == {**built, "axlebox_run.csv": TABLE.read_bytes()}
+    assert '<ssv:String value="axlebox_run.csv"/>' in ssd and str(EXP) not in ssd
     assert railfmu("validate", str(ssp)).returncode == 0
     res = railfmu("run", str(ssp), "--out", str(tmp_path / "run"), cwd=tmp_path)
     assert res.returncode == 0, res.stderr
@@ -131,21 +142,29 @@ def test_exported_ssp_carries_the_table_and_runs_to_the_same_estimates(shipped_r
         assert (tmp_path / "run" / f).read_bytes() == (out / f).read_bytes(), f
 
 
+def fmu_resources_of(fmu: Path) -> dict[str, bytes]:
+    with zipfile.ZipFile(fmu) as z:
+        return {n.removeprefix("resources/"): z.read(n) for n in z.namelist()
+                if n.startswith("resources/") and not n.endswith("/")}
+
+
 def test_a_table_named_on_the_command_line_is_bundled_by_export(simulated, tmp_path, fmu_dir):
-    """write_ssp copies a file a String parameter names (any absolute path) into resources/,
-    the reader resolves it there again: the archive no longer needs the original file."""
-    _, table, _ = simulated
+    """write_ssp puts a file a String parameter names (any absolute path) into the FMU's
+    resources/; the archive runs without the original file, to the same estimates."""
+    run, table, _ = simulated
     mine = tmp_path / "mine" / "monday run.csv"
     mine.parent.mkdir()
     shutil.copy(table, mine)
     system = read_system(EXP, variant="measured", fmu_dirs=[fmu_dir], overrides={"replay": {"file": str(mine)}})
     ssp = write_ssp(system, tmp_path / "mine.ssp")
     shutil.rmtree(mine.parent)
-    with zipfile.ZipFile(ssp) as zf:
-        assert zf.read("resources/monday run.csv") == table.read_bytes()
+    assert fmu_resources(ssp, "resources/SignalTable.fmu")["monday run.csv"] == table.read_bytes()
     back = read_system(ssp)
-    path = Path(back.component("replay").parameters["file"])
-    assert path.name == "monday run.csv" and path.read_bytes() == table.read_bytes()
+    assert back.component("replay").parameters["file"] == "monday run.csv"
+    bank = ObserverBank(back, tmp_path / "estimates.csv")
+    result = run_master(back, master="jacobi", sinks=[bank], progress=False)
+    assert result.end_time == 2.0
+    assert (tmp_path / "estimates.csv").read_bytes() == (run / "estimates.csv").read_bytes()
 
 
 def test_a_resource_in_a_variant_resolves_against_the_ssp_root_and_a_missing_one_is_one_line(

@@ -429,7 +429,8 @@ class _Reader:
         file of the SSP (a measured table, a track profile), as the SSD's FMU sources do: it
         is resolved against the SSP root, and the FMU gets the absolute path (an FMU resolves
         a relative one against its own ``resources/``, which the SSP's files are not in).
-        ``write_ssp`` bundles such files back into the archive's ``resources/``."""
+        ``write_ssp`` puts such a file into the FMU's own ``resources/``, where any importer
+        lets the FMU find it."""
         if var.type != "String" or not isinstance(value, str) or not value.startswith(RESOURCES):
             return value
         path = self.root.resolve(value, where)
