@@ -9,6 +9,9 @@ values, lowest priority first:
     FMU start values < component-level bindings (document order) < system-level bindings
     (``component.param``) < the variant (``variants/<v>.ssv``) < ``overrides`` (``--set``)
 
+A String value ``resources/...`` (from any of them) names a file of the SSP and is passed to
+the FMU as an absolute path (:meth:`_Reader._resource`).
+
 Every problem a user can cause is a one-line :class:`UserError` naming the file (with its
 line), the element and what is wrong; the system read is checked as every master checks it
 (:func:`fmus.cosim.system.check_system`), so ``railfmu validate`` reports what a run would
