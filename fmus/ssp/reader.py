@@ -9,6 +9,9 @@ values, lowest priority first:
     FMU start values < component-level bindings (document order) < system-level bindings
     (``component.param``) < the variant (``variants/<v>.ssv``) < ``overrides`` (``--set``)
 
+A String value ``resources/...`` (from any of them) names a file of the SSP and is passed to
+the FMU as an absolute path (:meth:`_Reader._resource`).
+
 Every problem a user can cause is a one-line :class:`UserError` naming the file (with its
 line), the element and what is wrong; the system read is checked as every master checks it
 (:func:`fmus.cosim.system.check_system`), so ``railfmu validate`` reports what a run would
@@ -79,6 +82,7 @@ __all__ = ["list_variants", "read_system", "validate_ssp", "write_ssp"]
 
 FMU_TYPE = "application/x-fmu-sharedlibrary"
 PARAMETER_SET = "application/x-ssp-parameter-set"
+RESOURCES = "resources/"  # SSP 1.0: an SSP's own files (FMUs, and any file a parameter names)
 RECORDER, OBSERVERS, EXPERIMENT, OSP = ("org.railfmu.recorder", "org.railfmu.observers",
                                         "org.railfmu.experiment", "com.opensimulationplatform")
 
@@ -421,7 +425,21 @@ class _Reader:
 
     def _set(self, comp: _Comp, v: ParamValue) -> None:
         var = self._settable(comp, v.name, v.where)
-        comp.params[var.name] = from_ssv(v, var, comp.units)
+        comp.params[var.name] = self._resource(var, from_ssv(v, var, comp.units), v.where)
+
+    def _resource(self, var, value, where: str):
+        """A String parameter whose value is a relative path under ``resources/`` names a
+        file of the SSP (a measured table, a track profile), as the SSD's FMU sources do: it
+        is resolved against the SSP root, and the FMU gets the absolute path (an FMU resolves
+        a relative one against its own ``resources/``, which the SSP's files are not in).
+        ``write_ssp`` puts such a file into the FMU's own ``resources/``, where any importer
+        lets the FMU find it."""
+        if var.type != "String" or not isinstance(value, str) or not value.startswith(RESOURCES):
+            return value
+        path = self.root.resolve(value, where)
+        if not path.is_file():
+            raise UserError(f"{where}: {value} not found in the SSP ({self.root.show(path)})")
+        return str(path.resolve())
 
     def _variant(self, variant: str) -> None:
         file = Path(variant)
@@ -458,7 +476,8 @@ class _Reader:
                 raise UserError(f"--set {cname}.{first}: no component {cname!r}; {self.known()}")
             for name, value in values.items():
                 where = f"--set {cname}.{name}"
-                comp.params[name] = from_cli(value, self._settable(comp, name, where), where)
+                var = self._settable(comp, name, where)
+                comp.params[name] = self._resource(var, from_cli(value, var, where), where)
 
     # -- time ---------------------------------------------------------------------------------
     def _time(self, start, stop, step, need: bool):

@@ -6,12 +6,17 @@ What other importers need is kept explicit: every component carries ONE inline
 the step size is written as our ``rf:FixedStep``, as libcosim's ``osp:FixedStepAlgorithm``
 and as OMSimulator's fixed-step master (an ``org.openmodelica`` annotation, the FIRST of the
 system's annotations: OMSimulator 3.0 reads only the first ``ssc:Annotation`` of a system),
-and each connection's affine map is a ``ssc:LinearTransformation``. Reading the archive back
-gives an equal System (apart from paths).
+and each connection's affine map is a ``ssc:LinearTransformation``. A file that a String
+parameter names (a measured table, a track profile) goes into that component's FMU, in its
+``resources/``, and the parameter names it relative to there: our FMUs resolve a relative
+file against their ``resources/``, which every importer (FMPy, libcosim, OMSimulator)
+provides, so the archive runs anywhere without the original file. Reading the archive back
+gives an equal System (apart from paths and those file names).
 """
 
 from __future__ import annotations
 
+import io
 import os
 import zipfile
 from pathlib import Path
@@ -39,8 +44,9 @@ def write_ssp(system: System, out: Path) -> Path:
     out = Path(out)
     check_system(system)
     mds = {c.name: c.md for c in system.components}
-    resources = _resource_names(system)
-    doc = _document(system, mds, resources)
+    files = {c.name: _parameter_files(c) for c in system.components}
+    resources = _resource_names(system, files)
+    doc = _document(system, mds, resources, files)
     problems = schema_problems(doc, "ssd", "SystemStructure.ssd")
     if problems:  # our own output: a bug, not a user error
         raise RuntimeError(f"write_ssp produced an invalid SSD: {problems[0]}")
@@ -50,29 +56,68 @@ def write_ssp(system: System, out: Path) -> Path:
         with zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as zf:
             zf.writestr("SystemStructure.ssd", etree.tostring(doc, xml_declaration=True, encoding="UTF-8",
                                                               pretty_print=True))
-            for fmu, arcname in dict.fromkeys((Path(c.fmu), resources[c.name]) for c in system.components):
-                zf.write(fmu, arcname)
+            written = set()
+            for c in system.components:
+                if resources[c.name] in written:
+                    continue
+                written.add(resources[c.name])
+                if files[c.name]:
+                    zf.writestr(resources[c.name], _with_resources(Path(c.fmu), files[c.name]))
+                else:
+                    zf.write(c.fmu, resources[c.name])
         os.replace(tmp, out)  # a reader never sees half an archive
     finally:
         tmp.unlink(missing_ok=True)
     return out
 
 
-def _resource_names(system: System) -> dict[str, str]:
-    """Component -> 'resources/<file>.fmu'; one copy per FMU file, distinct names for distinct files."""
-    by_file: dict[Path, str] = {}
+def _resource_names(system: System, files: dict[str, dict[str, tuple[Path, str]]]) -> dict[str, str]:
+    """Component -> 'resources/<file>.fmu'; one copy per FMU file (and set of files bundled
+    into it), distinct names for distinct contents."""
+    by_file: dict[tuple, str] = {}
     taken: set[str] = set()
     out = {}
     for c in system.components:
-        key = Path(c.fmu).resolve()
+        fmu = Path(c.fmu).resolve()
+        key = (fmu, tuple(sorted(files[c.name].values())))
         if key not in by_file:
-            name = f"resources/{key.name}"
+            name = f"resources/{fmu.name}"
             if name in taken:
-                name = f"resources/{c.name}_{key.name}"
+                name = f"resources/{c.name}_{fmu.name}"
             by_file[key] = name
             taken.add(name)
         out[c.name] = by_file[key]
     return out
+
+
+def _parameter_files(c) -> dict[str, tuple[Path, str]]:
+    """String parameter -> (the existing file it names by absolute path, its name in the
+    FMU's resources/); names are made distinct from each other and from the FMU's own."""
+    with zipfile.ZipFile(c.fmu) as z:
+        taken = {n.removeprefix("resources/") for n in z.namelist() if n.startswith("resources/")}
+    out: dict[str, tuple[Path, str]] = {}
+    for name, value in c.parameters.items():
+        var = c.variables.get(name)
+        if (var is None or var.type != "String" or not isinstance(value, str) or not value
+                or not Path(value).is_absolute() or not Path(value).is_file()):
+            continue
+        path = Path(value).resolve()
+        same = next((inner for p, inner in out.values() if p == path), None)
+        inner = same or (path.name if path.name not in taken else f"{name}_{path.name}")
+        taken.add(inner)
+        out[name] = (path, inner)
+    return out
+
+
+def _with_resources(fmu: Path, files: dict[str, tuple[Path, str]]) -> bytes:
+    """The FMU archive with ``files`` added to its resources/ (the rest copied unchanged)."""
+    buf = io.BytesIO()
+    with zipfile.ZipFile(fmu) as src, zipfile.ZipFile(buf, "w", zipfile.ZIP_DEFLATED) as dst:
+        for info in src.infolist():
+            dst.writestr(info, src.read(info))
+        for path, inner in dict(files.values()).items():
+            dst.write(path, f"resources/{inner}")
+    return buf.getvalue()
 
 
 def _sub(parent, tag: str, **attrs):
@@ -88,7 +133,7 @@ def _num(x: float) -> str:
     return repr(float(x))  # shortest text that reads back to the same double
 
 
-def _document(system: System, mds: dict, resources: dict[str, str]):
+def _document(system: System, mds: dict, resources: dict[str, str], files: dict):
     nsmap = {"ssd": SSD_NS, "ssc": SSC_NS, "ssv": SSV_NS, "rf": RF_NS, "osp": OSP_NS, "oms": OMS_NS}
     doc = etree.Element(f"{{{SSD_NS}}}SystemStructureDescription", nsmap=nsmap, version="1.0",
                         name=system.name)
@@ -117,7 +162,7 @@ def _document(system: System, mds: dict, resources: dict[str, str]):
                 if v.type == "Real" and unit:
                     used_units[unit] = where
         if c.parameters:
-            _parameters(comp, c, {v.name: v for v in md.modelVariables})
+            _parameters(comp, c, {v.name: v for v in md.modelVariables}, files[c.name])
     if system.connections:
         conns = _sub(sys_el, "ssd:Connections")
         variables = {c.name: {v.name: v for v in mds[c.name].modelVariables} for c in system.components}
@@ -150,8 +195,9 @@ def _shown_variables(system: System) -> dict[str, set[str]]:
     return out
 
 
-def _parameters(comp_el, c, variables: dict) -> None:
-    """One inline parameter set with the component's final values (what libcosim reads)."""
+def _parameters(comp_el, c, variables: dict, files: dict[str, tuple[Path, str]]) -> None:
+    """One inline parameter set with the component's final values (what libcosim reads); a
+    file a String parameter names is written as its name in the FMU's resources/."""
     binding = _sub(_sub(comp_el, "ssd:ParameterBindings"), "ssd:ParameterBinding")
     pset = _sub(_sub(binding, "ssd:ParameterValues"), "ssv:ParameterSet", version="1.0", name=c.name)
     params = _sub(pset, "ssv:Parameters")
@@ -164,7 +210,7 @@ def _parameters(comp_el, c, variables: dict) -> None:
         elif t in ("Integer", "Enumeration"):
             _sub(p, "ssv:Integer", value=str(int(value)))
         elif t == "String":
-            _sub(p, "ssv:String", value=str(value))
+            _sub(p, "ssv:String", value=files[name][1] if name in files else str(value))
         else:
             _sub(p, "ssv:Real", value=_num(value), unit=var.unit if var is not None and var.unit else None)
 

@@ -1,0 +1,32 @@
+"""A measured axle-box run replayed through an SSP into the alignment observers (Muñoz et al.).
+
+``SystemStructure.ssd``: a SignalTable FMU plays ``resources/axlebox_run.csv`` (wheelset
+lateral acceleration ``ddy``, yaw rate ``dpsi``, frame lateral acceleration ``ddy_f`` and the
+true alignment, as ``track_wheelset`` recorded them; ``record.py`` writes it) into the same
+alignment Kalman filter as ``track_wheelset``, and its RTS smoother offline. The table's end
+ends the run. A measured run replayed so gives the estimates of the simulated run bit for bit
+(``tests/test_replay.py``); swap in your own table as the SSD's description says. Variants
+(``variants/*.ssv``) change the observers, never the measured run: ``measured`` (the SSD as it
+is, the default) and ``conicity_minus10`` (the observers' conicity 10 % low, Muñoz et al.,
+Table 3).
+"""
+
+from experiments.study_protocol import Study
+
+PLOTS = {  # file -> (title, one list of (signal, label) per axis)
+    "sensors.png": ("Replayed sensor signals",
+                    [[("replay.y_1", "wheelset lateral acc. ddy [m/s2]")],
+                     [("replay.y_2", "wheelset yaw rate dpsi [rad/s]")],
+                     [("replay.y_3", "frame lateral acc. ddy_f [m/s2]")],
+                     [("replay.y_4", "measured alignment [m]")]]),
+}
+
+
+class AlignmentReplay(Study):
+    """The alignment observers on a replayed measured run; the study table is the default one
+    (each observer's raw error against the measured alignment, per variant)."""
+    default_variant = "measured"
+    figures_of_signals = PLOTS
+
+
+STUDY = AlignmentReplay(__doc__.strip().splitlines()[0])
