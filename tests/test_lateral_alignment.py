@@ -60,6 +60,15 @@ def test_reduced_standard_run(tmp_path):
     assert "## Offline observer `smoother`" in report and "## Observer `smoother`" not in report
 
 
+def test_a_run_too_short_to_score_is_one_line(tmp_path):
+    res = subprocess.run([sys.executable, "-m", "experiments.cli", "run", "lateral_alignment", "--stop-time", "0.5",
+                          "--master", "container", "--out", str(tmp_path)], capture_output=True, text=True)
+    assert res.returncode == 2
+    lines = [line for line in res.stderr.splitlines() if line.startswith("railfmu: error")]
+    assert len(lines) == 1 and "cannot score a run of 0.5 s" in lines[0] and "--stop-time" in lines[0], res.stderr
+    assert (tmp_path / "signals.csv").is_file()  # the run's signals are kept
+
+
 def test_resonance_wavelength_is_v_over_f1_of_the_complete_model():
     f1 = first_lateral_mode()[0]
     text = (EXP / "variants" / "resonance_case2.ssv").read_text()

@@ -25,6 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from experiments.study_protocol import RunData, Study, measurement, observers_md, output, parameter, truth
+from fmus.errors import UserError
 
 HERE = Path(__file__).resolve().parent
 DEFAULT_VARIANT = "standard"
@@ -146,9 +147,13 @@ class LateralAlignment(Study):
         online = np.asarray(estimates["alignment.xi"])
         kf = base["observers"]["alignment"]  # the online filter's diagnostics, timed by the bank
         smoother = base["observers"]["smoother"]  # the offline observer's diagnostics
-        f = alignment_errors(online, truth, V, dt, skip_s=START_UP_S)
-        s = alignment_errors(np.asarray(estimates["smoother.xi"]), truth, V, dt, skip_s=START_UP_S)
-        whole_run = alignment_errors(online, truth, V, dt)
+        try:
+            f = alignment_errors(online, truth, V, dt, skip_s=START_UP_S)
+            s = alignment_errors(np.asarray(estimates["smoother.xi"]), truth, V, dt, skip_s=START_UP_S)
+            whole_run = alignment_errors(online, truth, V, dt)
+        except ValueError as exc:  # a run too short to score: the user's --stop-time
+            raise UserError(f"lateral_alignment: cannot score a run of {base['simulated_seconds']:g} s ({exc}); "
+                            f"J is scored after the {START_UP_S:g} s run-in: give a longer --stop-time") from None
         return {
             "J_mm": f["J_mm"], "J_rel": f["J_rel"],
             "J_mm_smoothed": s["J_mm"], "J_rel_smoothed": s["J_rel"],
