@@ -79,6 +79,34 @@ def test_container_with_string_parameter(fmu_dir):
     np.testing.assert_array_equal(col(con, "wheelset.xi"), col(con, "track.alignment_1"))
 
 
+def test_monte_carlo_members_share_one_cached_container(tmp_path, monkeypatch):
+    # lateral_alignment (Muñoz et al.) with two seeds: TrackIrregularity.seed and
+    # SensorNoise.seed change, and Real, Integer and Boolean parameters are bound. The cache
+    # holds one folder, without the runs' values; each container run equals its Jacobi run.
+    from experiments.runner import find_experiment, load_system
+
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
+    exp = find_experiment("lateral_alignment")
+    runs = {}
+    for seed in (11, 12):
+        system = load_system(exp, "standard", seed=seed, stop_time=0.3)
+        runs[seed] = run(system, "jacobi", progress=False), run(system, "container", progress=False)
+    folders = sorted((tmp_path / "railfmu" / "containers").iterdir())
+    assert len(folders) == 1
+    for jac, con in runs.values():
+        assert con.columns == jac.columns and len(con.data) == 301
+        np.testing.assert_array_equal(con.data, jac.data)
+    # the seeds reached the FMUs: other track and other noise
+    a, b = (runs[s][1] for s in (11, 12))
+    for signal in ("track.alignment_1", "sensors.y_1"):
+        assert not np.array_equal(col(a, signal), col(b, signal)), signal
+    # the cached container carries the FMUs' own start values, not a run's
+    start = {v.name: v.start for v in read_model_description(str(folders[0])).modelVariables}
+    own = {c.name: {v.name: v.start for v in c.md.modelVariables} for c in system.components}
+    for comp in ("track", "sensors"):
+        assert start[f"{comp}.seed"] == own[comp]["seed"] not in ("11", "12")
+
+
 def test_container_refuses_affine_connection(fmu_dir):
     with pytest.raises(UserError, match=r"track\.alignment_1 -> wheelset\.xi.*--master jacobi"):
         run(track_wheelset(fmu_dir, factor=2.0), "container", progress=False)

@@ -6,9 +6,11 @@ driven by a JSON configuration; :func:`build_container` writes it from a :class:
 * every component, with its FMU extracted into the container's ``resources/<stem>/``;
 * every connection (all must be identity maps: the container copies values unchanged), Real,
   Integer or Boolean;
-* every parameter value of ``Component.parameters`` as a container parameter
-  ``component.name`` with that start value (Real, Integer, Boolean and String), which the
-  container sets on the component right after instantiating it;
+* every parameter of ``Component.parameters`` as a container parameter ``component.name``
+  (Real, Integer, Boolean and String), which the container forwards to the component: its
+  start value is set right after instantiation, and fmi2SetReal/Integer/Boolean/String on
+  it are passed on to every inner variable it maps to, in any state (FMPy's container
+  checks none);
 * every recorded signal as a container output ``component.variable`` of its own type.
 
 What the container does (FMPy 0.3.32; the same order as our Jacobi master, so their
@@ -31,6 +33,14 @@ independent ``time`` must be the first model variable (value reference 0) and st
 :func:`load_driver` compiles ``fmus/native/runtime/container_driver.c`` (a loop of doStep + getReal into
 a numpy buffer) at first use into a cache folder; without a C compiler the master falls back
 to a ctypes loop.
+
+Two kinds of container are written from one :func:`configuration`. The exported one
+(:func:`build_container`) carries the parameter values as start values, so it runs alone.
+The one the container master runs (:func:`cached_container_dir`) carries the FMUs' own start
+values and is keyed by the system's structure only: the master sets each run's values
+(:func:`parameter_values`, :func:`apply_parameters`) after fmi2EnterInitializationMode, the
+call order of the Jacobi master, so a Monte Carlo member, which changes only seeds, reuses
+the folder of the first member instead of writing its own.
 """
 
 from __future__ import annotations
@@ -73,25 +83,60 @@ from .system import System, check_system, recorded_signals
 DRIVER_SOURCE = Path(__file__).parent.parent / "native" / "runtime" / "container_driver.c"
 
 
-def _literal(var: ModelVariable, value, where: str) -> str:
-    """The start value as the container's JSON wants it (a string the Rust side parses)."""
+def _typed(var: ModelVariable, value, where: str):
+    """``value`` as the Python value of ``var``'s FMI type (float, int, bool or str);
+    UserError naming ``where`` when it is not one."""
     try:
         if var.type == "Real":
-            return repr(float(value))
+            return float(value)
         if var.type == "Integer":
-            return str(int(value))
+            return int(value)
         if var.type == "Boolean":
             if isinstance(value, str):
                 if value.strip().lower() not in ("true", "false", "1", "0"):
                     raise ValueError(value)
-                value = value.strip().lower() in ("true", "1")
-            return "true" if value else "false"
+                return value.strip().lower() in ("true", "1")
+            return bool(value)
         if var.type == "String":
             return str(value)
     except (TypeError, ValueError):
         raise UserError(f"{where}: {value!r} is not a valid {var.type} value") from None
     raise UserError(f"{where}: variables of type {var.type} cannot be set in a container FMU "
                     "(use --master jacobi)")
+
+
+def _literal(var: ModelVariable, value, where: str) -> str:
+    """The start value as the container's JSON wants it (a string the Rust side parses;
+    ``repr`` of a float reads back to the same double)."""
+    typed = _typed(var, value, where)
+    if var.type == "Real":
+        return repr(typed)
+    if var.type == "Boolean":
+        return "true" if typed else "false"
+    return str(typed)
+
+
+def parameter_values(system: System) -> list[tuple[str, str, object]]:
+    """``(container variable, FMI type, value)`` of every ``Component.parameters`` entry,
+    converted and checked (UserError for a value that is not of its variable's type)."""
+    out = []
+    for comp in system.components:
+        for name, value in comp.parameters.items():
+            where = f"{comp.name}.{name}"
+            inner = comp.variable(name, where)
+            out.append((where, inner.type, _typed(inner, value, where)))
+    return out
+
+
+def apply_parameters(slave: Slave, values: list[tuple[str, str, object]]) -> None:
+    """Set ``values`` (:func:`parameter_values`) on the container ``slave``, which passes each
+    on to its component; one call per variable, so a refusal names it. Called between
+    fmi2EnterInitializationMode and fmi2ExitInitializationMode, as the Jacobi master sets
+    them, so both masters make the same calls on every FMU."""
+    f = slave.fmu
+    setters = {"Real": f.setReal, "Integer": f.setInteger, "Boolean": f.setBoolean, "String": f.setString}
+    for name, type_, value in values:
+        slave.call(f"setting {name}", setters[type_], [slave.var(name).valueReference], [value])
 
 
 def check_containable(system: System) -> None:
@@ -128,9 +173,11 @@ def _host_platform() -> str:
     return f"{arch}-{osname}"
 
 
-def configuration(system: System) -> Configuration:
+def configuration(system: System, values: bool = True) -> Configuration:
     """The ``fmpy.container_fmu`` configuration of ``system`` (UserError for what the
-    container cannot run or what names nothing)."""
+    container cannot run or what names nothing). ``values``: the parameters' start values
+    are ``Component.parameters``; else the FMUs' own start values (the cached container, to
+    which the master applies each run's values), so nothing in it depends on the values."""
     check_containable(system)
     components = {comp.name: CComponent(name=comp.name, filename=Path(comp.fmu).resolve(),
                                         modelDescription=comp.md) for comp in system.components}
@@ -143,9 +190,9 @@ def configuration(system: System) -> Configuration:
     for comp in system.components:
         for name, value in comp.parameters.items():
             inner = var(comp.name, name)
+            start = _literal(inner, value, f"{comp.name}.{name}") if values else inner.start
             cv = ModelVariable(name=f"{comp.name}.{name}", type=inner.type, causality="parameter",
-                               variability="fixed", initial="exact",
-                               start=_literal(inner, value, f"{comp.name}.{name}"),
+                               variability="fixed", initial="exact", start=start,
                                description=inner.description)
             mappings[cv] = [(components[comp.name], inner)]
             by_name[cv.name] = cv
@@ -223,17 +270,21 @@ CACHE_KEEP = 16  # container folders kept in the cache (least recently used go f
 
 
 def cached_container_dir(system: System) -> Path:
-    """The unzipped container FMU of ``system`` in the cache folder, written on first use.
+    """The unzipped container FMU of ``system`` in the cache folder, written on first use,
+    without the parameter values (``configuration(system, values=False)``): the master
+    applies them to each instance (:func:`apply_parameters`).
 
-    Keyed by everything the container is written from (each component's FMU bytes and
-    parameter values, the connections, the recorded signals, the time grid, FMPy's
-    version and this module's source), so a repeated run (a study, a benchmark, the same
-    variant again) skips extracting the FMUs and deleting them afterwards: on this
-    machine's file system that cost more than stepping 20 s of the system."""
+    Keyed by everything the container is written from: each component's FMU bytes, name
+    and the names and types of its bound parameters (not their values), the connections,
+    the recorded signals, the time grid, FMPy's version and this module's source. So a
+    repeated run (a study, a Monte Carlo member with another seed, a benchmark, another
+    variant that binds the same parameters) skips extracting the FMUs and deleting them
+    afterwards: on this machine's file system that cost more than stepping 20 s of the
+    system."""
     h = hashlib.sha256()
     for c in system.components:
         h.update(hashlib.sha256(Path(c.fmu).read_bytes()).digest())
-        h.update(repr((c.name, sorted((k, repr(v)) for k, v in c.parameters.items()))).encode())
+        h.update(repr((c.name, [(k, c.variable(k).type) for k in c.parameters])).encode())
     h.update(repr([(c.src, c.src_var, c.dst, c.dst_var, c.factor, c.offset) for c in system.connections]).encode())
     h.update(repr((system.name, system.record, system.start_time, system.stop_time, system.step_size)).encode())
     h.update(repr((fmpy.__version__, _host_platform())).encode())
@@ -244,7 +295,7 @@ def cached_container_dir(system: System) -> Path:
         root.mkdir(parents=True, exist_ok=True)
         tmp = root / f"{target.name}.{os.getpid()}.tmp"
         shutil.rmtree(tmp, ignore_errors=True)
-        write_container_dir(configuration(system), tmp, all_platforms=False)
+        write_container_dir(configuration(system, values=False), tmp, all_platforms=False)
         try:
             os.replace(tmp, target)  # atomic: a concurrent run never sees half a folder
         except OSError:  # another process got there first
@@ -263,7 +314,8 @@ def _prune(root: Path) -> None:
 
 def build_container(system: System, out: Path) -> Path:
     """Write the container FMU of ``system`` to ``out`` (a ``.fmu`` with the container
-    binaries of every platform fmpy ships); returns ``out``."""
+    binaries of every platform fmpy ships, the parameter values as start values, so it runs
+    alone); returns ``out``."""
     out = Path(out)
     config = configuration(system)
     out.parent.mkdir(parents=True, exist_ok=True)
@@ -285,7 +337,7 @@ class ContainerSlave(Slave):
     from an unzipped folder (:func:`write_container_dir`), which :meth:`close` removes
     unless ``keep_dir`` (a cached folder).
     A failed instantiation (the container sets the parameters' start values there, so a
-    refused parameter fails it) becomes a UserError with what the FMUs logged."""
+    refused start value fails it) becomes a UserError with what the FMUs logged."""
 
     def __init__(self, unzipdir: Path, instance_name: str, keep_dir: bool = False):
         self.keep_dir = keep_dir

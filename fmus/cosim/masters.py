@@ -498,8 +498,10 @@ DRIVER_OK, DRIVER_DO_STEP_FAILED, DRIVER_GET_FAILED, DRIVER_NON_FINITE, DRIVER_T
 def _run_container(system: System, sinks: Sequence[Sink], progress: bool) -> RunResult:
     from .container import (
         ContainerSlave,
+        apply_parameters,
         cached_container_dir,
         load_driver,
+        parameter_values,
     )
 
     n = check_system(system)
@@ -511,7 +513,8 @@ def _run_container(system: System, sinks: Sequence[Sink], progress: bool) -> Run
     bar = _Progress(progress, start, stop)
     ended: str | None = None
     try:
-        unzipdir = cached_container_dir(system)
+        values = parameter_values(system)  # a bad value is refused before anything is written
+        unzipdir = cached_container_dir(system)  # one folder for every run of this structure
         slave = ContainerSlave(unzipdir, system.name or "system", keep_dir=True)
         names = {v.name: v for v in slave.md.modelVariables}
         record = recorded_signals(system)
@@ -522,6 +525,7 @@ def _run_container(system: System, sinks: Sequence[Sink], progress: bool) -> Run
             typed[v.type][0].append(v.valueReference)
             typed[v.type][1].append(col)
         slave.enter_initialization(start, stop)
+        apply_parameters(slave, values)
         slave.exit_initialization()
         f = _Fmu(slave)
         keep = []  # ctypes arrays the driver points into
