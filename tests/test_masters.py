@@ -16,7 +16,13 @@ What is asserted (and measured when this was written):
 * the CSV recorder writes n_steps + 1 rows that read back to the result exactly; a run
   stopped by an overflow (factor 1e308 on xi, a 1 mm step at t = 1 s) raises UserError
   naming wheelset.ddy at t = 1 s and leaves a readable CSV of the rows before it;
-* the container refuses a non-identity connection, suggesting --master jacobi.
+* the container refuses a non-identity connection, suggesting --master jacobi;
+* Monte Carlo members (lateral_alignment, two seeds, and Integer and Boolean values other
+  than the variant's) share one cached container folder, which holds the FMUs' own start
+  values, and each run equals its Jacobi run bit for bit; a refused value is the same one
+  line as before the values left the cache key;
+* the exported container (build_container) carries the values as start values: FMPy's
+  simulate_fmu runs it alone to the Jacobi samples bit for bit.
 """
 
 from __future__ import annotations
@@ -88,23 +94,45 @@ def test_monte_carlo_members_share_one_cached_container(tmp_path, monkeypatch):
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
     exp = find_experiment("lateral_alignment")
     runs = {}
-    for seed in (11, 12):
-        system = load_system(exp, "standard", seed=seed, stop_time=0.3)
-        runs[seed] = run(system, "jacobi", progress=False), run(system, "container", progress=False)
+    # and an Integer and a Boolean value other than the variant's: no noise, PSD level 2
+    sets = {11: None, 12: None, "other": {"sensors": {"enabled": "false"}, "track": {"psd_level": "2"}}}
+    for key, overrides in sets.items():
+        system = load_system(exp, "standard", overrides, seed=11 if key == "other" else key, stop_time=0.3)
+        runs[key] = run(system, "jacobi", progress=False), run(system, "container", progress=False)
     folders = sorted((tmp_path / "railfmu" / "containers").iterdir())
     assert len(folders) == 1
     for jac, con in runs.values():
         assert con.columns == jac.columns and len(con.data) == 301
         np.testing.assert_array_equal(con.data, jac.data)
-    # the seeds reached the FMUs: other track and other noise
-    a, b = (runs[s][1] for s in (11, 12))
+    # the values reached the FMUs: other track and other noise
+    a, b, c = (runs[k][1] for k in sets)
     for signal in ("track.alignment_1", "sensors.y_1"):
         assert not np.array_equal(col(a, signal), col(b, signal)), signal
+        assert not np.array_equal(col(a, signal), col(c, signal)), signal
     # the cached container carries the FMUs' own start values, not a run's
     start = {v.name: v.start for v in read_model_description(str(folders[0])).modelVariables}
     own = {c.name: {v.name: v.start for v in c.md.modelVariables} for c in system.components}
     for comp in ("track", "sensors"):
         assert start[f"{comp}.seed"] == own[comp]["seed"] not in ("11", "12")
+
+
+def test_exported_container_runs_alone_with_the_values(fmu_dir, tmp_path):
+    # build_container bakes the values in as start values: FMPy's own simulate_fmu, which
+    # sets no parameter, runs it to the Jacobi master's samples bit for bit
+    from fmpy import simulate_fmu
+
+    from fmus.cosim.container import build_container
+
+    record = ["track.alignment_1", "wheelset.y", "wheelset.ddy"]
+    system = track_wheelset(fmu_dir, track={**TRACK, "seed": 21}, stop_time=0.5, record=record)
+    fmu = build_container(system, tmp_path / "track_wheelset.fmu")
+    start = {v.name: v.start for v in read_model_description(str(fmu)).modelVariables}
+    assert start["track.seed"] == "21" and start["track.psd_level"] == "1"
+    alone = simulate_fmu(str(fmu), stop_time=0.5, step_size=1e-3, output_interval=1e-3, output=record)
+    jac = run(system, "jacobi", progress=False)
+    np.testing.assert_array_equal(alone["time"], col(jac, "time"))
+    for signal in record:
+        np.testing.assert_array_equal(alone[signal], col(jac, signal))
 
 
 def test_container_refuses_affine_connection(fmu_dir):
@@ -113,8 +141,13 @@ def test_container_refuses_affine_connection(fmu_dir):
 
 
 def test_container_reports_a_bad_parameter(fmu_dir):
-    with pytest.raises(UserError, match="psd_level = 7"):
+    # the value is set in initialisation mode; the track refuses it when leaving it
+    with pytest.raises(UserError) as err:
         run(track_wheelset(fmu_dir, track={"psd_level": 7}), "container", progress=False)
+    assert str(err.value) == ("track_wheelset.fmu (track_wheelset): fmi2ExitInitializationMode failed: "
+                              "parameter psd_level = 7 must be 0, 1 or 2")
+    with pytest.raises(UserError, match=r"^track\.psd_level: 'two' is not a valid Integer value$"):
+        run(track_wheelset(fmu_dir, track={"psd_level": "two"}), "container", progress=False)
 
 
 def test_gauss_seidel_exact_where_nothing_is_coupled(fmu_dir, results):
