@@ -15,9 +15,11 @@ def all_models() -> list[Model]:
     from .step_source import STEP_SOURCE
     from .track import TRACK
     from .vehicle_lateral import VEHICLE_LATERAL
+    from .train_longitudinal import TRAIN_LONGITUDINAL
     from .wheelset import WHEELSET
 
-    return [TRACK, WHEELSET, COACH_VERTICAL, STEP_SOURCE, SENSORS, VEHICLE_LATERAL, SIGNAL_TABLE]
+    return [TRACK, WHEELSET, COACH_VERTICAL, STEP_SOURCE, SENSORS, VEHICLE_LATERAL, SIGNAL_TABLE,
+            TRAIN_LONGITUDINAL]
 
 
 __all__ = ["Input", "Model", "Output", "Parameter", "State", "Variable", "all_models"]
