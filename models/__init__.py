@@ -10,6 +10,8 @@ from .base import Input, Model, Output, Parameter, State, Variable
 def all_models() -> list[Model]:
     """Every model that is built into an FMU, in build order."""
     from .coach_vertical import COACH_VERTICAL
+    from .driver import DRIVER
+    from .gnss import GNSS_RECEIVER
     from .sensors import SENSORS
     from .signal_table import SIGNAL_TABLE
     from .step_source import STEP_SOURCE
@@ -19,7 +21,7 @@ def all_models() -> list[Model]:
     from .wheelset import WHEELSET
 
     return [TRACK, WHEELSET, COACH_VERTICAL, STEP_SOURCE, SENSORS, VEHICLE_LATERAL, SIGNAL_TABLE,
-            TRAIN_LONGITUDINAL]
+            TRAIN_LONGITUDINAL, GNSS_RECEIVER, DRIVER]
 
 
 __all__ = ["Input", "Model", "Output", "Parameter", "State", "Variable", "all_models"]

@@ -23,6 +23,12 @@
 
 #include "model.h"
 
+#if defined(__GNUC__)
+#define LINE_MAYBE_UNUSED __attribute__((unused))
+#else
+#define LINE_MAYBE_UNUSED
+#endif
+
 typedef struct {
     size_t n;
     double *position; /* m, strictly increasing */
@@ -176,7 +182,7 @@ fail:
 }
 
 /* The row that applies at position s (0 before the first row). */
-static size_t line_row(LineProfile *p, double s) {
+LINE_MAYBE_UNUSED static size_t line_row(LineProfile *p, double s) {
     size_t c = p->cursor, lo = 0, hi = p->n;
     if (c < p->n && p->position[c] <= s && (c + 1 == p->n || p->position[c + 1] > s)) return c;
     while (lo < hi) { /* first row with position > s */
