@@ -137,3 +137,25 @@ def test_a_bad_line_file_is_one_message(fmu_dir, tmp_path, text, message):
     assert message in str(err.value) and "bad.csv" in str(err.value)
     with pytest.raises(ValueError):
         LineProfile.read(p)
+
+
+def test_fmu_state_restores_the_run(fmu_dir):
+    """What a UKF with the FMU as process model does: save, step a sigma point, restore."""
+    fmu = start(fmu_dir, inputs={"command": 1.0})
+    for k in range(60):
+        fmu.do_step(float(k), 1.0)
+    state = fmu.fmu.getFMUstate()
+    fmu.set("r2", 2 * R2)
+    fmu.do_step(60.0, 10.0)
+    perturbed = fmu.get("v")
+    fmu.fmu.setFMUstate(state)
+    fmu.set("r2", R2)
+    fmu.do_step(60.0, 10.0)
+    twin = Train()
+    twin.u["command"] = 1.0
+    for k in range(60):
+        twin.step(1.0)
+    twin.step(10.0)
+    assert fmu.get("v") == twin.v and fmu.get("s") == twin.s and perturbed < twin.v
+    fmu.fmu.freeFMUstate(state)
+    fmu.close()
