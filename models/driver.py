@@ -22,7 +22,7 @@ mode name             regime  command / leaves when
 3    cycle traction   1       f until v >= v* + 2 km/h                 (traction/coast cycles)
 4    cycle coast      3       0 until v <= v* - 3 km/h
 5    coast            3       0, from the coasting point s >= s_c on
-6    brake for limit  4       -min(b(v) rho_lim, b_max) / b_max while rho_lim >= 0.5
+6    brake for limit  4       -min(b(v) max(rho_lim, 1), b_max) / b_max while rho_lim >= 0.1
 7    brake to stop    4       -min(b(v) max(rho_lim, rho_stop), b_max) / b_max until v = 0
 8    stopped          0       -b_5 / b_max (held); the FMU ends the simulation
 ==== ================ ======= ================================================================
@@ -30,7 +30,8 @@ mode name             regime  command / leaves when
 Braking follows the ATB-EG speed steps (> 130, 130-80, 80-60, 60-40, < 40 km/h) with the
 style's rate ``b_k`` in each: the distance to brake from ``v`` to ``v_t`` is
 ``D(v, v_t) = sum_k (min(v, hi_k)^2 - max(v_t, lo_k)^2)^+ / (2 b_k)``; for each lower limit
-ahead (row j, ``v > limit_j + 0.05 m/s``) ``rho_j = D(v, limit_j) / (p_j - s)`` and for the
+ahead (row j, ``v > limit_j + 0.05 m/s``) ``rho_j = D(v, limit_j) / (p_j - s - 2 s v)`` (the
+limit is reached 2 s before its start: the driver's and a Jacobi master's delay) and for the
 stop ``rho_stop = D(v, 0) / (L - s)``. Braking starts where a rho reaches 1 (any non-braking
 mode) and the deceleration ``b(v) rho`` follows the curve, so the train reaches each limit at
 its start and stops at ``L`` (``rho_stop = v^2 / (2 b_5 (L - s))`` below 40 km/h: the
@@ -68,6 +69,7 @@ WAIT, ACCELERATE, HOLD, CYCLE_TRACTION, CYCLE_COAST, COAST, BRAKE_LIMIT, BRAKE_S
 REGIME = (0, 1, 2, 1, 3, 3, 4, 4, 0)
 REGIME_NAMES = {0: "standstill", 1: "traction", 2: "cruising", 3: "coasting", 4: "braking"}
 KMH = 1.0 / 3.6
+ANTICIPATION = 2.0  # s: a limit is reached this long before its start (driver's and master's delay)
 STEP_LOW = (130.0 * KMH, 80.0 * KMH, 60.0 * KMH, 40.0 * KMH, 0.0)
 GAMMA = 0x9E3779B97F4A7C15
 _M64 = (1 << 64) - 1
@@ -177,7 +179,8 @@ class DriverTwin:
         for j in range(len(ln.position) - 1):
             pj, vj = float(ln.position[j]), float(ln.limit[j])
             if pj > s and v > vj + 0.05:
-                rho = self.brake_distance(v, vj) / (pj - s)
+                left = pj - s - ANTICIPATION * v
+                rho = self.brake_distance(v, vj) / left if left > 0.01 else 1e6
                 if rho > lim:
                     lim = rho
         L = float(ln.position[-1])
@@ -199,7 +202,7 @@ class DriverTwin:
         if rs >= 1.0:
             return BRAKE_STOP
         if before == BRAKE_LIMIT:
-            if rl >= 0.5:
+            if rl >= 0.1:  # until the limit is reached
                 return BRAKE_LIMIT
             return COAST if past else self._cruise_mode()
         if rl >= 1.0:
@@ -240,6 +243,8 @@ class DriverTwin:
             return st["traction_fraction"]
         if mode in (BRAKE_LIMIT, BRAKE_STOP):
             rl, rs = self.braking_need(s, v)
+            if mode == BRAKE_LIMIT and rl < 1.0:  # at least the step's rate
+                rl = 1.0
             if mode == BRAKE_STOP and rl < rs:
                 rl = rs
             return -_clip(self.brake_rate_at(v) * rl, 0.0, bmax) / bmax

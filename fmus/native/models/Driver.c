@@ -17,6 +17,7 @@ enum { WAIT, ACCELERATE, HOLD, CYCLE_TRACTION, CYCLE_COAST, COAST, BRAKE_LIMIT, 
 static const int REGIME[] = {0, 1, 2, 1, 3, 3, 4, 4, 0};
 
 #define KMH (1.0 / 3.6)
+#define ANTICIPATION 2.0 /* s */
 static const uint64_t GAMMA = UINT64_C(0x9E3779B97F4A7C15);
 
 static uint64_t mix64(uint64_t z) {
@@ -80,7 +81,10 @@ static void braking_need(ModelInstance *m, double s, double v, double *limit, do
     if (!(v > 0)) return;
     for (j = 0; j + 1 < p->n; j++) {
         if (p->position[j] > s && v > p->limit[j] + 0.05) {
-            const double rho = brake_distance(m, v, p->limit[j]) / (p->position[j] - s);
+            /* reaching the limit ANTICIPATION s before its start covers the driver's and the
+               master's delay */
+            const double left = p->position[j] - s - ANTICIPATION * v;
+            const double rho = left > 0.01 ? brake_distance(m, v, p->limit[j]) / left : 1e6;
             if (rho > *limit) *limit = rho;
         }
     }
@@ -98,7 +102,7 @@ static int decide(ModelInstance *m, int before, double s, double v, double limit
     braking_need(m, s, v, &rl, &rs);
     if (rs >= 1.0) return BRAKE_STOP;
     if (before == BRAKE_LIMIT) {
-        if (rl >= 0.5) return BRAKE_LIMIT;
+        if (rl >= 0.1) return BRAKE_LIMIT; /* until the limit is reached */
         return past_coast ? COAST : cruise_mode(m);
     }
     if (rl >= 1.0) return BRAKE_LIMIT;
@@ -142,6 +146,8 @@ static double command(ModelInstance *m, int mode, double s, double v, double lim
     case BRAKE_LIMIT:
     case BRAKE_STOP:
         braking_need(m, s, v, &rl, &rs);
+        if (mode == BRAKE_LIMIT && rl < 1.0) rl = 1.0; /* at least the step's rate: under the
+                                                          limit by its start */
         if (mode == BRAKE_STOP && rl < rs) rl = rs;
         return -clip(brake_rate_at(m, v) * rl, 0.0, bmax) / bmax;
     case STOPPED:
