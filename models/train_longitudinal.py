@@ -9,7 +9,8 @@ Equations (SI; ``u`` the command input clipped to [-1, 1], ``v+ = max(v, 0)``)::
     F_t   = max(u, 0) min(F_max, P_max / v+)              traction envelope (N)
     f_t   = F_t / (gamma m),  m = m_tare + m_load          mass-specific tractive effort (N/kg)
     f_b   = max(-u, 0) b_max                              mass-specific brake effort (N/kg)
-    g(s)  = g0 i(s) / (1000 gamma)                        gradient term (N/kg), i in per mille
+    g(s)  = g0 (i(s) / 1000 + w_c(s)) / gamma             line term (N/kg): gradient i in per
+                                                          mille, curve w_c (Röckl, optional)
 
 The command is a signed fraction of the available effort: ``u = 1`` full traction, ``u = -1``
 the maximum deceleration ``b_max``, 0 coasting. ``r0, r1, r2`` are inputs, so another
@@ -110,7 +111,7 @@ def build() -> Model:
         Output("power", "Applied power (F_t - F_b) v", "W"),
         Output("resistance_specific", "Running resistance r(v) (eq. 2)", "N/kg"),
         Output("gradient", "Line gradient at s (positive uphill)", ""),
-        Output("gradient_specific", "Gradient term g(s) = g0 i / (1000 gamma)", "N/kg"),
+        Output("gradient_specific", "Line term g(s) = g0 (i / 1000 + w_c) / gamma: gradient and curve", "N/kg"),
         Output("speed_limit", "Line speed limit at s", "m/s"),
     ]
     return Model(
@@ -156,7 +157,8 @@ class Train:
         return (u * avail if u > 0 else 0.0), (-u * p["max_deceleration"] if u < 0 else 0.0)
 
     def grade(self, s: float) -> float:
-        return G0 * self.line.gradient_at(s) / 1000.0 / self.p["rotating_mass_factor"]
+        k = self.line.row(s)
+        return G0 * (float(self.line.gradient[k]) / 1000.0 + float(self.line.curve[k])) / self.p["rotating_mass_factor"]
 
     def accel(self, s: float, v: float) -> float:
         Ft, fb = self.efforts(v)

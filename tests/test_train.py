@@ -125,6 +125,8 @@ def test_standstill_on_an_uphill_is_held(fmu_dir, tmp_path):
 
 @pytest.mark.parametrize("text, message", [
     ("position_m,gradient_permille,speed_limit_kmh\n0,0,140\n10,x,140\n", "line 3, column 2"),
+    ("position_m,gradient_permille,speed_limit_kmh,curve_radius_m\n0,0,140,40\n", "beyond 55 m"),
+    ("position_m,gradient_permille,speed_limit_kmh,curve_radius_m\n0,0,140\n", "3 fields, expected 4"),
     ("position_m,gradient_permille,speed_limit_kmh\n0,0,140\n0,0,140\n", "does not increase"),
     ("position_m,gradient\n0,0\n", "2 fields"),
     ("position_m,gradient_permille,speed_limit_kmh\n0,0,nan\n", "line 2, column 3"),
@@ -158,4 +160,21 @@ def test_fmu_state_restores_the_run(fmu_dir):
     twin.step(10.0)
     assert fmu.get("v") == twin.v and fmu.get("s") == twin.s and perturbed < twin.v
     fmu.fmu.freeFMUstate(state)
+    fmu.close()
+
+
+@pytest.mark.parametrize("radius, w_c", [(1055.0, 0.65 / 1000), (-230.0, 0.5 / 200), (0.0, 0.0)])
+def test_curve_resistance_from_the_optional_fourth_column(fmu_dir, tmp_path, radius, w_c):
+    """Röckl: 0.65 / (R - 55) from 300 m, 0.5 / (R - 30) below, either sign; coasting at
+    20 m/s on a 1 per mille uphill curve decelerates by r(v) + g0 (i / 1000 + w_c) / gamma."""
+    p = tmp_path / "curvy.csv"
+    p.write_text("position_m,gradient_permille,speed_limit_kmh,curve_radius_m\n"
+                 f"0,1.0,140,{radius}\n5000,0,140,0\n")
+    fmu = start(fmu_dir, {"line_file": str(p)}, {"v": 20.0})
+    expected = -(R0 + 20 * R1 + 400 * R2) - G0 * (1e-3 + w_c) / GAMMA
+    assert fmu.get("acceleration") == pytest.approx(expected, rel=1e-14)
+    assert LineProfile.read(p).curve_at(10.0) == pytest.approx(w_c, rel=1e-15)
+    twin = Train(line=p)
+    twin.v = 20.0
+    assert twin.outputs()["acceleration"] == fmu.get("acceleration")
     fmu.close()

@@ -7,6 +7,7 @@
  *     ...
  *     32103,0.0,40          <- the last row: the stopping point at the end of the line
  *
+ * An optional fourth column curve_radius_m (0 = straight) adds Roeckl's curve resistance.
  * Row k applies from position_m[k] up to the next row; before the first row the first row
  * applies, from the last row on the last. Positions increase strictly. Included (static) by
  * TrainLongitudinal.c and Driver.c.
@@ -34,6 +35,7 @@ typedef struct {
     double *position; /* m, strictly increasing */
     double *gradient; /* per mille, positive uphill */
     double *limit;    /* m/s (the file's km/h / 3.6) */
+    double *curve;    /* curve resistance per unit weight (Roeckl), 0 on straight track */
     size_t cursor;    /* row of the previous lookup: a hint, not part of the FMU state */
 } LineProfile;
 
@@ -42,6 +44,7 @@ static void line_free(LineProfile *p) {
     free(p->position);
     free(p->gradient);
     free(p->limit);
+    free(p->curve);
     free(p);
 }
 
@@ -67,14 +70,23 @@ static int line_number(const char *f, double *x) {
     return 0;
 }
 
-static const char *const LINE_COLUMNS[3] = {"position_m", "gradient_permille", "speed_limit_kmh"};
+static const char *const LINE_COLUMNS[4] = {"position_m", "gradient_permille", "speed_limit_kmh",
+                                            "curve_radius_m"};
+
+/* Roeckl's curve resistance per unit weight for a radius R (m, either sign; 0 = straight):
+   0.65 / (R - 55) for R >= 300 m, 0.5 / (R - 30) below (standard gauge) */
+static double line_curve(double R) {
+    R = fabs(R);
+    if (R == 0) return 0.0;
+    return R >= 300.0 ? 0.65 / (R - 55.0) : 0.5 / (R - 30.0);
+}
 
 /* Reads the file; NULL after one model_error naming the file, line and column. */
 static LineProfile *line_load(ModelInstance *m, const char *file) {
     char *path = model_resolve_path(m, file), line[4096];
     FILE *f;
     LineProfile *p;
-    size_t cap = 0;
+    size_t cap = 0, ncol = 3;
     long lineno = 0;
     if (!*file) {
         model_error(m, "parameter line_file is empty: a line profile CSV (%s,%s,%s) is needed",
@@ -95,9 +107,9 @@ static LineProfile *line_load(ModelInstance *m, const char *file) {
     }
     p = (LineProfile *)calloc(1, sizeof *p);
     while (p && fgets(line, sizeof line, f)) {
-        char *fld[4], *s = line, *c;
+        char *fld[5], *s = line, *c;
         size_t nf = 0, j;
-        double v[3];
+        double v[4] = {0, 0, 0, 0};
         lineno++;
         if (lineno == 1 && (unsigned char)s[0] == 0xEF && (unsigned char)s[1] == 0xBB &&
             (unsigned char)s[2] == 0xBF)
@@ -107,18 +119,20 @@ static LineProfile *line_load(ModelInstance *m, const char *file) {
         for (;;) {
             c = strchr(s, ',');
             if (c) *c = '\0';
-            if (nf < 4) fld[nf] = line_trim(s);
+            if (nf < 5) fld[nf] = line_trim(s);
             nf++;
             if (!c) break;
             s = c + 1;
         }
-        if (nf != 3) {
-            model_error(m, "line_file %s, line %ld: %lu fields, expected 3 (%s,%s,%s)", path, lineno,
-                        (unsigned long)nf, LINE_COLUMNS[0], LINE_COLUMNS[1], LINE_COLUMNS[2]);
+        if (lineno == 1 && nf == 4) ncol = 4;
+        if (nf != ncol) {
+            model_error(m, "line_file %s, line %ld: %lu fields, expected %lu (%s,%s,%s[,%s])", path,
+                        lineno, (unsigned long)nf, (unsigned long)ncol, LINE_COLUMNS[0],
+                        LINE_COLUMNS[1], LINE_COLUMNS[2], LINE_COLUMNS[3]);
             goto fail;
         }
         if (lineno == 1) {
-            for (j = 0; j < 3; j++)
+            for (j = 0; j < ncol; j++)
                 if (strcmp(fld[j], LINE_COLUMNS[j]) != 0) {
                     model_error(m, "line_file %s, line 1, column %lu: header '%s', expected '%s'", path,
                                 (unsigned long)j + 1, fld[j], LINE_COLUMNS[j]);
@@ -126,7 +140,7 @@ static LineProfile *line_load(ModelInstance *m, const char *file) {
                 }
             continue;
         }
-        for (j = 0; j < 3; j++)
+        for (j = 0; j < ncol; j++)
             if (line_number(fld[j], &v[j])) {
                 model_error(m, "line_file %s, line %ld, column %lu (%s): '%s' is not a finite number",
                             path, lineno, (unsigned long)j + 1, LINE_COLUMNS[j], fld[j]);
@@ -135,6 +149,11 @@ static LineProfile *line_load(ModelInstance *m, const char *file) {
         if (p->n > 0 && !(v[0] > p->position[p->n - 1])) {
             model_error(m, "line_file %s, line %ld, column 1 (position_m): %.17g does not increase "
                            "on the previous row's %.17g", path, lineno, v[0], p->position[p->n - 1]);
+            goto fail;
+        }
+        if (ncol == 4 && v[3] != 0 && !(fabs(v[3]) > 55.0)) {
+            model_error(m, "line_file %s, line %ld, column 4 (curve_radius_m): %.17g must be 0 "
+                           "(straight) or beyond 55 m", path, lineno, v[3]);
             goto fail;
         }
         if (!(v[2] > 0)) {
@@ -146,20 +165,23 @@ static LineProfile *line_load(ModelInstance *m, const char *file) {
             size_t nc = cap ? 2 * cap : 64;
             double *a = (double *)realloc(p->position, nc * sizeof *a);
             double *b = a ? (double *)realloc(p->gradient, nc * sizeof *b) : NULL;
-            double *d = NULL;
+            double *d = NULL, *e = NULL;
             if (a) p->position = a;
             if (b) p->gradient = b;
             if (b) d = (double *)realloc(p->limit, nc * sizeof *d);
-            if (!d) {
+            if (d) p->limit = d;
+            if (d) e = (double *)realloc(p->curve, nc * sizeof *e);
+            if (!e) {
                 model_error(m, "line_file %s: out of memory", path);
                 goto fail;
             }
-            p->limit = d;
+            p->curve = e;
             cap = nc;
         }
         p->position[p->n] = v[0];
         p->gradient[p->n] = v[1];
         p->limit[p->n] = v[2] / 3.6;
+        p->curve[p->n] = line_curve(v[3]);
         p->n++;
     }
     if (!p) {

@@ -26,9 +26,10 @@ static void efforts(const ModelInstance *m, double v, double *Ft, double *fb) {
     *fb = u < 0 ? -u * m->r[VR_max_deceleration] : 0.0;
 }
 
-static double gradient_term(ModelInstance *m, double s) { /* g(s), N/kg */
+static double gradient_term(ModelInstance *m, double s) { /* g(s): gradient + curve, N/kg */
     LineProfile *p = (LineProfile *)m->modelData;
-    return G0 * p->gradient[line_row(p, s)] / 1000.0 / m->r[VR_rotating_mass_factor];
+    const size_t k = line_row(p, s);
+    return G0 * (p->gradient[k] / 1000.0 + p->curve[k]) / m->r[VR_rotating_mass_factor];
 }
 
 static double accel(ModelInstance *m, double s, double v) {
