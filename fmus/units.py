@@ -24,6 +24,10 @@ UNITS: dict[str, dict[str, int]] = {
     "N.m/rad": {"kg": 1, "m": 2, "s": -2, "rad": -1},
     "N.m.s/rad": {"kg": 1, "m": 2, "s": -1, "rad": -1},
     "Hz": {"s": -1},
+    "W": {"kg": 1, "m": 2, "s": -3},
+    "N/kg": {"m": 1, "s": -2},  # mass-specific effort and resistance (Cunillera et al. 2022)
+    "N.s/(m.kg)": {"s": -1},  # Davis r1, mass-specific
+    "N.s2/(m2.kg)": {"m": -1},  # Davis r2, mass-specific
 }
 
 
