@@ -177,7 +177,9 @@ def run_experiment(name: str, variant: str | None = None, out: Path | str | None
              + plot_estimates(bank, signals, units, out)
              + exp.study.figures(RunData(signals, estimates, metrics, roles), out))
     _report(exp, system, metrics, plots, out)
-    print(f"wrote {out}/: signals.csv, estimates.csv, metrics.json, report.md, {', '.join(plots)}", file=log)
+    offline = [f"estimates_{name}.csv" for name in bank.results]
+    print(f"wrote {out}/: {', '.join(['signals.csv', 'estimates.csv', *offline, 'metrics.json', 'report.md', *plots])}",
+          file=log)
     return metrics
 
 
