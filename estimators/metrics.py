@@ -48,7 +48,6 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy.signal import butter, sosfiltfilt
 
 #: EN 13848-1 wavelength ranges (m) for alignment, as quoted by Muñoz et al. (§1, §5.3)
 BANDS: dict[str, tuple[float, float]] = {"whole": (3.0, 200.0), "D1": (3.0, 25.0),
@@ -107,6 +106,8 @@ def bandpass(x: np.ndarray, V: float, dt: float, band: str | tuple[float, float]
     if lo <= 2 * ds:
         raise ValueError(f"bandpass: band {lo}-{hi} m reaches the Nyquist wavelength 2 V dt = {2 * ds} m "
                          "(sample faster or drive slower)")
+    from scipy.signal import butter, sosfiltfilt  # here: scipy.signal costs ~1 s to import, rms() users never need it
+
     sos = butter(int(order), [1.0 / hi, 1.0 / lo], btype="bandpass", fs=1.0 / ds, output="sos")
     padlen = 3 * (2 * len(sos) + 1)  # sosfiltfilt's default
     if x.shape[0] <= padlen:

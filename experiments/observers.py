@@ -31,6 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
+from estimators.metrics import rms
 from fmus.cosim.recorder import CsvRecorder
 from fmus.cosim.system import ObserverSpec, System
 from fmus.errors import UserError
@@ -310,8 +311,8 @@ class ObserverBank:
                     truth = a * truth + b
                 truth = truth[rows]
                 err = est[rows, j] - truth
-                rms_truth = float(np.sqrt(np.mean(truth ** 2)))
-                rms_err = float(np.sqrt(np.mean(err ** 2)))
+                rms_truth = rms(truth)
+                rms_err = rms(err)
                 m[name] = {"rms_error": rms_err, "rms_truth": rms_truth,
                            "rel_error": rms_err / rms_truth if rms_truth > 0 else None,
                            "from_time_s": float(t[n0])}

@@ -20,6 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
+from estimators.metrics import rms
 from fmus.errors import UserError
 
 from .study_protocol import RunData, Study
@@ -154,7 +155,7 @@ def run_experiment(name: str, variant: str | None = None, out: Path | str | None
         "realtime_factor": simulated / result.wall_time_s,
         "parameters": {c.name: c.parameters for c in system.components},
         "observer_settings": {o.name: o.settings for o in system.observers},
-        "rms": {k: float(np.sqrt(np.mean(v ** 2))) for k, v in signals.items() if k != "time"},
+        "rms": {k: rms(v) for k, v in signals.items() if k != "time"},
         "observers": bank.metrics(signals),
         "roles": roles,  # what the study read where (study_protocol.Role)
         "warnings": system.warnings,

@@ -25,6 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
+from estimators.metrics import rms
 from fmus.errors import UserError
 
 from .runner import _json_default, find_experiment, run_experiment
@@ -54,7 +55,7 @@ def statistics(values) -> dict[str, float]:
     p50 and p95 (linear interpolation between order statistics, numpy's default); max."""
     x = np.asarray(values, dtype=float)
     return {"mean": float(x.mean()), "std": float(x.std(ddof=1)) if x.size > 1 else 0.0,
-            "rms": float(np.sqrt(np.mean(x ** 2))), "min": float(x.min()),
+            "rms": rms(x), "min": float(x.min()),
             "p50": float(np.percentile(x, 50)), "p95": float(np.percentile(x, 95)), "max": float(x.max())}
 
 
