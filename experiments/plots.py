@@ -26,12 +26,11 @@ def _pyplot():
 
 def units_of(system) -> dict[str, str]:
     """``{"component.variable": unit}`` of every variable of the system's FMUs (for axis
-    labels), read from their model descriptions: deriving the models would take seconds."""
-    from fmpy import read_model_description
-
+    labels), from the model descriptions the system already holds: deriving the models would
+    take seconds."""
     units = {}
     for c in system.components:
-        for v in read_model_description(str(c.fmu)).modelVariables:
+        for v in c.variables.values():
             unit = v.unit or (v.declaredType.unit if v.declaredType is not None else None)
             units[f"{c.name}.{v.name}"] = unit or "-"
     return units

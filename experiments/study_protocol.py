@@ -60,15 +60,13 @@ def output(component: str, name: str) -> Role:
     return Role("output", component, name)
 
 
-def _start_value(fmu: Path, name: str):
-    """A parameter's start value as the FMU declares it (typed), or None."""
-    from fmpy import read_model_description
-
-    for v in read_model_description(str(fmu)).modelVariables:
-        if v.name == name and v.start is not None:
-            return {"Real": float, "Integer": int, "Boolean": lambda s: str(s).lower() in ("true", "1")}.get(
-                v.type, str)(v.start)
-    return None
+def _start_value(comp, name: str):
+    """A parameter's start value as the component's FMU declares it (typed), or None."""
+    v = comp.variables.get(name)
+    if v is None or v.start is None:
+        return None
+    return {"Real": float, "Integer": int, "Boolean": lambda s: str(s).lower() in ("true", "1")}.get(
+        v.type, str)(v.start)
 
 
 def bind_role(system, role: Role):
@@ -98,7 +96,7 @@ def bind_role(system, role: Role):
             return signal
         if role.name in comp.parameters:
             return comp.parameters[role.name]
-        value = _start_value(comp.fmu, role.name)
+        value = _start_value(comp, role.name)
         if value is None:
             raise UserError(f"{where}: component {role.owner!r} has no parameter {role.name!r}")
         return value
