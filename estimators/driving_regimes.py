@@ -45,18 +45,20 @@ intervals split between two regimes).
 
 Features (§3.3), from the recognised regimes
 ---------------------------------------------
-"Continuous traction": fix ``j`` and fix ``j-1`` both traction (the whole interval, as far as
-the fixes tell; the first fix of a traction block is dropped, its interval began in another
-regime). Speed windows use the interval's mid speed ``(v_(j-1) + v_j) / 2``: the effort of
+"Continuously accelerating" (§3.3): fix ``j`` and fix ``j-1`` both traction (the whole
+interval, as far as the fixes tell; the first fix of a traction block is dropped, its
+interval began in another regime) and ``a > 0`` (a traction fix that slows the train is an
+interval that mixes a coast into the pull: the mean effort of 2 s of traction in 10 s
+passes the band; it took 5 % off the power of one of 20 twin runs). Speed windows use the interval's mid speed ``(v_(j-1) + v_j) / 2``: the effort of
 an interval belongs to the speeds it spans.
 
-* ``max_effort_specific`` (N/kg): the continuous-traction fixes with mid speed in 10-30 km/h
+* ``max_effort_specific`` (N/kg): the continuously accelerating fixes with mid speed in 10-30 km/h
   (below: the gentle start; 30-50 km/h: the transition to the power limit and the 40 km/h
   departure limit, §4.4), a line f = c0 + c1 v fitted by Theil-Sen (:func:`theil_sen_at`),
   its value at 10 km/h (the maximum tractive effort is constant or falls with speed, §3.3:
   the low end is the maximum). One fix: its effort; none: NaN. Times ``mass_effective`` in ``max_effort`` (N).
-* ``max_power_specific`` (W/kg): the mean of ``f v_mid`` over the continuous-traction fixes
-  with mid speed in 50-130 km/h (mass-specific power f v: what the fixes give without a
+* ``max_power_specific`` (W/kg): the mean of ``f v_mid`` over the continuously accelerating
+  fixes with mid speed in 50-130 km/h (mass-specific power f v: what the fixes give without a
   mass). ``max_power`` (W) = ``mass_effective`` times it.
 * ``brake_rates`` (m/s2, five, NaN where a step has none): the mean deceleration ``-a`` of the
   braking fixes by the ATB-EG step of their mid speed: > 130, 130-80, 80-60, 60-40, < 40 km/h;
@@ -251,7 +253,7 @@ def features(time, speed, acceleration, effort, regimes, mass_effective: float |
     kmh = vm / KMH
     prev = _previous(r)
     prev[:1] = -1  # fix 0 has no interval
-    continuous = (r == TRACTION) & (prev == TRACTION)
+    continuous = (r == TRACTION) & (prev == TRACTION) & (a > 0)
 
     sel = continuous & (kmh >= EFFORT_WINDOW_KMH[0]) & (kmh <= EFFORT_WINDOW_KMH[1])
     max_effort = theil_sen_at(vm[sel], f[sel], EFFORT_WINDOW_KMH[0] * KMH)
