@@ -196,6 +196,8 @@ def test_too_short_a_run_and_mismatched_arrays_are_errors():
         features([0.0], [0.0], [0.0], [0.0], [0])
     with pytest.raises(ValueError, match="effort has 2 samples, expected 3"):
         recognise([0, 1, 2], [0, 1, 1], [0, 1])
+    with pytest.raises(ValueError, match=r"acceleration\[1\] is nan, not a finite number"):
+        recognise([0, 1, 2], [0, np.nan, 1], [0, 1, 1])
 
 
 # ---- twin runs ----------------------------------------------------------------------------
