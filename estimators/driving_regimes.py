@@ -87,7 +87,8 @@ speeds it spans.
   the coasting fixes after the last traction fix and before that brake (the final coast
   from the coasting point on: the driver does not pull again; a brake for a lower limit
   inside it, and the fixes at its edges that mix braking and coasting into "cruising", do
-  not count). A block of fixes ``j0..j1`` lasts ``t_(j1) - t_(j0-1)``. 20 twin runs every
+  not count). A block of fixes ``j0..j1`` lasts ``t_(j1) - t_(j0-1)``. Both NaN unless the
+  fixes end at rest (a record that ends before the stop has not seen the final brake). 20 twin runs every
   10 s: the final coast within 35 s, the final brake within 13 s of the truth (the same
   function on :func:`true_regimes`); every 1 s within 1 s.
 """
@@ -237,15 +238,17 @@ def _duration(t: np.ndarray, first: int, last: int) -> float:
     return float(t[last] - t[max(first - 1, 0)])
 
 
-def final_durations(time, regimes) -> tuple[float, float]:
+def final_durations(time, regimes, speed=None, standstill_speed: float = STANDSTILL_SPEED
+                    ) -> tuple[float, float]:
     """(final coast, final brake) durations in s: the last block of braking fixes, and the
     coasting fixes after the last traction fix and before that brake (module docstring). NaN
-    where the run has no such fixes. ``time``/``regimes`` per fix, each fix describing the
-    interval before it; the driver's grid (``regime[k]`` the step after ``t_k``) takes
-    ``time + h``."""
+    where the run has no such fixes, or (with ``speed``, m/s) does not end at rest: fixes
+    that stop before the train does have not seen the final brake end. ``time``/``regimes``
+    per fix, each fix describing the interval before it; the driver's grid (``regime[k]``
+    the step after ``t_k``) takes ``time + h``."""
     t, r = np.asarray(time, dtype=float), np.asarray(regimes).astype(int)
     brakes = [b for b in _blocks(r) if b[0] == BRAKING]
-    if not brakes:
+    if not brakes or (speed is not None and np.asarray(speed, dtype=float)[-1] > standstill_speed):
         return math.nan, math.nan
     _, b0, b1 = brakes[-1]
     pulled = np.flatnonzero(r[:b0] == TRACTION)
@@ -301,7 +304,7 @@ def features(time, speed, acceleration, effort, regimes, mass_effective: float |
 
     cruise = (r == CRUISING) & (v >= 0.5 * v.max())
     cruise_speed = float(np.median(v[cruise])) if cruise.any() else math.nan
-    coast, brake = final_durations(t, r)
+    coast, brake = final_durations(t, r, v, standstill_speed)
 
     out = {"max_effort_specific": max_effort, "max_power_specific": max_power, "brake_rates": rates,
            "cruise_speed": cruise_speed, "final_coast_duration": coast, "final_brake_duration": brake,
@@ -349,3 +352,20 @@ def feature_errors(feats: Mapping, truth: Mapping) -> dict:
             "max_effort_rel_error": rel("max_effort_specific"),
             "cruise_speed_error_kmh": abs(feats["cruise_speed"] - truth["cruise_speed"]) / KMH,
             "brake_rate_error": [none(e - b) for e, b in zip(feats["brake_rates"], truth["brake_rates"])]}
+
+
+def score(fix_time, speed, acceleration, effort, time, true_speed, true_effort, style: Mapping,
+          train: Mapping) -> tuple[dict, dict]:
+    """One estimator on one simulated run, as the study records it: ``(metrics, features)``.
+
+    ``fix_time``, ``speed``, ``acceleration``, ``effort``: the estimator's outputs at the GNSS
+    fixes (rows where the receiver's ``valid`` is set; effort and acceleration of the interval
+    ending at each fix). ``time``, ``true_speed``, ``true_effort``: the driver's grid as the
+    Jacobi master records it (``train.v``, ``train.effort_specific``). ``style``, ``train``:
+    as :func:`feature_truth`. ``metrics`` holds ``regime_accuracy`` and the
+    :func:`feature_errors`; ``features`` is :func:`features`' dict."""
+    rec = recognise(speed, acceleration, effort)
+    truth = feature_truth(style, train)
+    feats = features(fix_time, speed, acceleration, effort, rec, truth["mass_effective"])
+    accuracy = regime_accuracy(rec, true_regimes(time, true_speed, true_effort), fix_time, time)
+    return {"regime_accuracy": accuracy, **feature_errors(feats, truth)}, feats

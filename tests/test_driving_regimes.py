@@ -15,10 +15,11 @@ from scipy.stats import theilslopes
 from estimators.driving_regimes import (BRAKING, COASTING, CRUISING, KMH, STANDSTILL, TRACTION,
                                         feature_errors, feature_truth, features, final_durations,
                                         interval_regimes, recognise, regime_accuracy,
-                                        theil_sen_at, true_regimes)
+                                        score, theil_sen_at, true_regimes)
+from fmus.cosim import masters
+from fmus.cosim.system import Component, Connection, System
 from models.train_longitudinal import (GAMMA, LOAD_MASS, MAX_POWER, MAX_TRACTION_FORCE,
                                        TARE_MASS)
-
 from train_runs import sample, simulate
 
 TRAIN = {"max_power": MAX_POWER, "max_traction_force": MAX_TRACTION_FORCE, "tare_mass": TARE_MASS,
@@ -100,7 +101,8 @@ def test_brake_rates_per_atb_eg_step_on_a_stepped_braking():
     edges = np.array([150.0, 130, 80, 60, 40, 0]) * KMH
     durations = np.array([40, 90, 30, 25, 30])  # s
     rates = (edges[:-1] - edges[1:]) / durations  # 0.139, 0.154, 0.185, 0.222, 0.370 m/s2
-    v = np.concatenate([[edges[0]]] + [edges[k] - rates[k] * np.arange(1, d + 1) for k, d in enumerate(durations)])
+    v = np.concatenate([[edges[0]]] + [edges[k] - rates[k] * np.arange(1, d + 1)
+                                       for k, d in enumerate(durations)])
     v = np.r_[v, 0.0, 0.0]  # at rest for two fixes
     t = np.arange(v.size, dtype=float)
     a = np.r_[0.0, np.diff(v)]
@@ -111,11 +113,13 @@ def test_brake_rates_per_atb_eg_step_on_a_stepped_braking():
     assert np.allclose(feats["brake_rates"], rates, rtol=1e-12, atol=0)
     # fix 0 (no interval, zero effort) reads as coasting, for no time
     assert feats["final_brake_duration"] == durations.sum() and feats["final_coast_duration"] == 0.0
-    assert feats["brake_samples"]["step"].tolist() == sum(([k + 1] * d for k, d in enumerate(durations)), [])[:-1]
+    steps = sum(([k + 1] * d for k, d in enumerate(durations)), [])
+    assert feats["brake_samples"]["step"].tolist() == steps[:-1]  # the last ends at rest
     # no fix in a step: NaN there, None in the errors
     cut = t <= 40 + 90  # only down to 80 km/h
     feats = features(t[cut], v[cut], a[cut], f[cut], r[cut])
-    assert np.allclose(feats["brake_rates"][:2], rates[:2]) and all(map(math.isnan, feats["brake_rates"][2:]))
+    assert np.allclose(feats["brake_rates"][:2], rates[:2])
+    assert all(map(math.isnan, feats["brake_rates"][2:]))
     err = feature_errors({**feats, "max_power_specific": 1.0, "max_effort_specific": 1.0, "cruise_speed": 30.0},
                          {"max_power_specific": 1.0, "max_effort_specific": 1.0, "cruise_speed": 30.0,
                           "brake_rates": list(rates)})
@@ -189,6 +193,10 @@ def test_final_durations_skip_a_limit_brake_and_its_edges():
     assert final_durations(t, r) == (80.0, 20.0)
     coast, brake = final_durations(t[:4], [1, 3, 3, 0])
     assert math.isnan(coast) and math.isnan(brake)  # no brake: no final phase
+    v = np.full(len(r), 20.0)
+    assert final_durations(t, r, np.r_[v[:-1], 0.0]) == (80.0, 20.0)
+    coast, brake = final_durations(t[:-1], r[:-1], v[:-1])  # the fixes end before the stop
+    assert math.isnan(coast) and math.isnan(brake)
 
 
 def test_too_short_a_run_and_mismatched_arrays_are_errors():
@@ -237,7 +245,8 @@ def test_features_with_exact_signals(seed):
     err = feature_errors(feats, ref)
     assert err["max_power_rel_error"] < 0.01 and err["max_effort_rel_error"] < 0.07
     assert err["cruise_speed_error_kmh"] < 1.0
-    assert abs(feats["final_coast_duration"] - coast) <= 35 and abs(feats["final_brake_duration"] - brake) <= 10
+    assert abs(feats["final_coast_duration"] - coast) <= 35
+    assert abs(feats["final_brake_duration"] - brake) <= 10
 
 
 @pytest.mark.parametrize("seed", [HOLDING, CYCLES, SLOW_CYCLES])
@@ -252,3 +261,42 @@ def test_features_from_gnss_fixes(seed):
     err = feature_errors(features(d["time"], d["speed"], d["acceleration"], d["effort"], rec),
                          feature_truth(run.style, TRAIN))
     assert err["max_power_rel_error"] < 0.01 and err["cruise_speed_error_kmh"] < 1.0
+
+
+def test_the_truth_from_the_fmus_recorded_signals(fmu_dir):
+    """What the experiment passes for the truth: the Jacobi run of the FMUs records, at t_k,
+    the train's ``effort_specific`` with the command it holds over [t_k, t_k+1] (the driver's
+    output read before its inputs were updated), so ``true_regimes(time, train.v,
+    train.effort_specific)`` is the twins' truth. The recorded ``driver.regime`` is one step
+    ahead: the recorder reads the driver after the master set its inputs of t_k, so it has
+    already decided the command of the next step."""
+    seed = CYCLES
+    system = System(
+        "train_run",
+        [Component("train", fmu_dir / "TrainLongitudinal.fmu", {}),
+         Component("driver", fmu_dir / "Driver.fmu", {"seed": seed})],
+        [Connection("driver", "command", "train", "command"),
+         Connection("train", "s", "driver", "s"), Connection("train", "v", "driver", "v"),
+         Connection("train", "speed_limit", "driver", "speed_limit")],
+        stop_time=3000.0, step_size=1.0, record=["train.v", "train.effort_specific", "driver.regime"])
+    res = masters.run(system, "jacobi", progress=False)
+    col = {c: res.data[:, j] for j, c in enumerate(res.columns)}
+    t, v = col["time"], col["train.v"]
+    truth = true_regimes(t, v, col["train.effort_specific"])
+    run, twin_truth = twin(seed)
+    n = t.size - 1  # the FMU run ends at the stop; the twin dwells there
+    assert np.array_equal(v[:n], run.v[:n])
+    assert np.array_equal(truth[:n - 1], twin_truth[:n - 1])
+    assert np.array_equal(col["driver.regime"][:n - 1], run.regime[1:n])
+
+
+def test_score_is_the_pieces_together():
+    run, truth = twin(HOLDING)
+    d, rec = recognised(run, 10.0, {"seed": HOLDING})
+    metrics, feats = score(d["time"], d["speed"], d["acceleration"], d["effort"], run.time, run.v,
+                           run.effort, run.style, TRAIN)
+    assert metrics["regime_accuracy"] == regime_accuracy(rec, truth, d["time"], run.time)
+    ref = feature_errors(features(d["time"], d["speed"], d["acceleration"], d["effort"], rec),
+                         feature_truth(run.style, TRAIN))
+    assert metrics == {"regime_accuracy": metrics["regime_accuracy"], **ref}
+    assert feats["max_power"] == pytest.approx(feats["max_power_specific"] * GAMMA * (TARE_MASS + LOAD_MASS))
