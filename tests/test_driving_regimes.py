@@ -70,7 +70,8 @@ def test_true_regimes_by_the_sign_of_the_effort_and_the_steps_acceleration():
     v = np.array([0.0, 0.5, 1.0, 1.03, 1.03, 0.5, 0.0])
     f = np.array([0.6, 0.6, 0.1, 1e-9, -0.01, -0.6, -0.5])
     # step k is [t_k, t_k+1]: accelerating 0.5, 0.5; 0.03 (within the band); 0 with a tiny pull;
-    # braking through the band's edge; the last point at rest
+    # a brake of 0.01 N/kg (inside the recogniser's effort band: the truth has none); braking;
+    # the last point at rest
     assert list(true_regimes(t, v, f)) == [TRACTION, TRACTION, CRUISING, CRUISING, BRAKING, BRAKING,
                                            STANDSTILL]
     assert true_regimes([0, 1, 2], [5, 5, 5], [0.0, 0.0, 0.0]).tolist() == [COASTING] * 3
