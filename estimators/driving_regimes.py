@@ -320,6 +320,21 @@ def features(time, speed, acceleration, effort, regimes, mass_effective: float |
     return out
 
 
+def reference_features(time, speed, effort, mass_effective: float | None = None) -> dict:
+    """:func:`features` of a simulated run on the driver's own grid with its exact signals:
+    what the run reveals at full resolution, the reference for what the style outputs do not
+    give (the final coast and brake durations) or give only as intent (the Driver's applied
+    brake rates exceed its style's, module docstring). ``time``, ``speed``, ``effort`` as
+    :func:`true_regimes` (the recorded ``train.v`` and ``train.effort_specific``); fix ``k``
+    is the step ``[t_(k-1), t_k]``, its regime the step's :func:`true_regimes`. Score the
+    power and effort against :func:`feature_truth` instead: the recorded effort is the one
+    at ``t_k``, not the step's mean, which puts P/v off by ``dv / 2v`` (~0.5 %)."""
+    t, v, f = _arrays(time=time, speed=speed, effort=effort)
+    r = np.r_[STANDSTILL, true_regimes(t, v, f)[:-1]]
+    a = np.r_[0.0, np.diff(v) / np.diff(t)]
+    return features(t, v, a, np.r_[0.0, f[:-1]], r, mass_effective)
+
+
 def feature_truth(style: Mapping, train: Mapping) -> dict:
     """The values the features are scored against, from the Driver's style outputs
     (``cruise_target``, ``traction_fraction``, ``brake_rate_1..5``) and the Train's parameters

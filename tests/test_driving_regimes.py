@@ -15,7 +15,8 @@ from scipy.stats import theilslopes
 from estimators.driving_regimes import (BRAKING, COASTING, CRUISING, KMH, STANDSTILL, TRACTION,
                                         feature_errors, feature_truth, features, final_durations,
                                         interval_regimes, recognise, regime_accuracy,
-                                        score, theil_sen_at, true_regimes)
+                                        reference_features, score, theil_sen_at,
+                                        true_regimes)
 from fmus.cosim import masters
 from fmus.cosim.system import Component, Connection, System
 from models.train_longitudinal import (GAMMA, LOAD_MASS, MAX_POWER, MAX_TRACTION_FORCE,
@@ -245,6 +246,11 @@ def test_features_with_exact_signals(seed):
     assert feats["final_coast_duration"] == coast and feats["final_brake_duration"] == brake
     if not run.style["cycles"]:
         assert err["cruise_speed_error_kmh"] < 1.0  # holds 0.46 km/h under the target
+    # the run's own grid gives the same: the reference for the durations and applied brake rates
+    ref_feats = reference_features(run.time, run.v, run.effort)
+    assert ref_feats["final_coast_duration"] == coast and ref_feats["final_brake_duration"] == brake
+    assert feature_errors(ref_feats, ref)["max_power_rel_error"] < 1e-4
+    assert np.allclose(ref_feats["brake_rates"], feats["brake_rates"], rtol=0.02, equal_nan=True)
     # every 10 s: the power within 1 % (measured 0.02-0.03 %), the effort from one or two fixes
     # within 7 % (measured 1.4, 1.3, 6.2 %), cruise within 1 km/h, the durations within 35 s
     d, rec = recognised(run, 10.0)
