@@ -256,9 +256,10 @@ class ImuErrorsTwin:
         return out
 
     def run(self, t, h, dtheta_in, dv_in, t0: float | None = None, exact: bool = True) -> dict[str, np.ndarray]:
-        """Outputs at the communication points ``t`` (s; ``t[0]`` is the start, in
-        initialisation mode) reached by steps ``h`` (s; scalar, or one per point with ``h[0]``
-        ignored), for the ideal increments ``dtheta_in``, ``dv_in`` (arrays (n, 3), the inputs
+        """Outputs at the communication points ``t`` (s, as the master computes them; ``t[0]``
+        is the start, in initialisation mode) reached by steps ``h`` (s; scalar, or one per
+        point with ``h[0]`` ignored; the step from ``t[m-1]`` ends at the FMU time
+        ``t[m-1] + h[m]``), for the ideal increments ``dtheta_in``, ``dv_in`` (arrays (n, 3), the inputs
         at each point). Returns every output of the FMU by name, as arrays of length n."""
         p = self.p
         t = np.asarray(t, dtype=float)
@@ -266,14 +267,17 @@ class ImuErrorsTwin:
         t0 = float(t[0]) if t0 is None else float(t0)
         hs = np.broadcast_to(np.asarray(h, dtype=float), (n,)).copy()
         hs[0] = 0.0
+        # the FMU's own time after a step from t[m-1] is t[m-1] + h (the runtime's r[0])
+        tf = t.copy()
+        tf[1:] = t[:-1] + hs[1:]
         k = np.zeros(n, dtype=np.int64)
         if n > 1:
-            k[1:] = sample_index(t[1:], t0, hs[1:])
+            k[1:] = sample_index(tf[1:], t0, hs[1:])
             if np.any(np.diff(k) <= 0):
                 raise ValueError("the sample index would repeat: the step size grew during the run")
         u = {"gyro": np.asarray(dtheta_in, dtype=float).reshape(n, 3),
              "accel": np.asarray(dv_in, dtype=float).reshape(n, 3)}
-        out: dict[str, np.ndarray] = {"sample": k, "sample_time": t.copy()}
+        out: dict[str, np.ndarray] = {"sample": k, "sample_time": tf}
         seed = int(p["seed"])
         for s, sensor in enumerate(SENSORS):
             noise_si, _ = _si(sensor)
