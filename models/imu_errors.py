@@ -20,9 +20,10 @@ in m/s2), axis ``i`` of x, y, z, with the increment ``u`` over ``[t - h, t]``::
               + N sqrt(h) w_i(k)                          angle / velocity random walk
 
 ``(I + S + M)`` with ``S = diag(s_i)`` and the off-diagonal ``m_ij`` is the small-angle
-sensor-axes matrix of Groves (2013, §4.4.2): ``m_ij`` is the angle (rad) by which sensitive
-axis ``i`` leans towards body axis ``j``; a pure mounting rotation by small angles phi is
-``m = -[phi x]``, non-orthogonal axes need all six. With every error zero ``y_i = u_i`` bit for
+sensor-axes matrix of the IMU error model in Groves (2013), *Principles of GNSS, Inertial, and
+Multisensor Integrated Navigation Systems*, 2nd ed., ch. 4: ``m_ij`` is the angle (rad) by which
+sensitive axis ``i`` leans towards body axis ``j``; a triad rotated by the small angles phi
+measures ``(I - [phi x]) u`` (``m = -[phi x]``), non-orthogonal axes need all six. With every error zero ``y_i = u_i`` bit for
 bit (the sum is only added where it is non-zero).
 
 Bias instability: a first-order Gauss-Markov (GM) process per axis,
@@ -46,9 +47,11 @@ datasheet floor, so an analyst reading the floor of our data divides by 0.664 an
 back. ``Tc`` is a parameter (datasheets do not give it): 1 h in the grades, about 50 times the
 ~70 s between the stops of Jiang et al. (2017), so the bias is nearly constant between two
 zero-velocity updates as their filter assumes (§2, "piecewise constant") yet drifts over a
-run. At ``tau_p = 1.8926 Tc`` the white noise adds ``N^2 / tau_p`` to the Allan variance: up to
-30 % of it for the navigation-grade gyro at Tc = 1 h (0.005 °/√h against 0.0066 °/h), < 2 %
-for the other grades.
+run. At ``tau_p = 1.8926 Tc`` the white noise adds ``N^2 / tau_p`` to the Allan variance: 30 %
+of the GM's for the navigation-grade gyro at Tc = 1 h (0.005 °/√h against a 0.0066 °/h floor),
+< 2 % in the other grades; below Tc the GM is a rate random walk, ``sigma_A^2 ~ (2 sigma_b^2 /
+Tc) tau / 3``, which adds 19 % to the Allan variance at 1 s of the tactical-grade
+accelerometer (its 1 mg bias instability against 34 µg/√Hz), < 1 % elsewhere.
 
 Exact discretisation over the actual step ``h`` (any ``h``; no small-step approximation). With
 ``x = h / Tc``, ``e = expm1(-x)`` (so ``beta = e^-x = 1 + e`` and ``1 - beta = -e`` are exact to

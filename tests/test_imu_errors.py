@@ -4,15 +4,22 @@ discretisation equals Van Loan's at 50 digits for any step, the Allan deviation 
 at rest reads back its datasheet numbers, the deterministic errors follow their closed forms,
 the noise does not depend on how the master computes its time, and a bad grade is one line.
 
-Measured when written (seed 1; the Allan deviations vary by 1-3 % per axis between seeds, at
-most 5 % over seeds 1-8 in every grade, so the +-10 % bounds hold with margin):
-N from the fit at tau = 1 s and B from the floor, relative to the parameters, per axis x, y, z:
+Measured when written (FMU, seed 1, axes x / y / z; the random walk N from the IEEE 952 fit at
+tau = 1 s, the bias instability B = floor / 0.664 at tau_p = 1.89 Tc, in datasheet units;
+over seeds 1-8 every axis of every grade stayed within 5 % of its parameter, so the +-10 %
+bounds are not a lucky seed):
 
-=================  ======================  ======================  ======================  ======================
-grade              gyro N                  accel N                 gyro B                  accel B
-=================  ======================  ======================  ======================  ======================
-navigation_grade   see the report          ...
-=================  ======================  ======================  ======================  ======================
+================  ========================  ========================  =======================  ======================
+grade             gyro N (°/√h)             gyro B (°/h)              accel N (µg/√Hz)         accel B (µg)
+================  ========================  ========================  =======================  ======================
+navigation_grade  0.00493 0.00506 0.00505   0.01003 0.01024 0.00978   9.88 9.96 10.07          49.8 51.5 49.1
+tactical_grade    0.1234 0.1266 0.1262      0.999 1.015 0.980         33.20 33.63 33.79        996 1030 983
+mems_grade        0.2961 0.3038 0.3028      5.99 6.08 5.88            83.97 84.69 85.55        19.9 20.5 19.7
+================  ========================  ========================  =======================  ======================
+
+The tactical accelerometer's raw Allan deviation at 1 s is 36.1 / 37.1 / 37.2 µg (+9 %): its
+1 mg bias instability already adds a rate-random-walk part there, which the fit separates.
+The C equals the twin with tolerance 0 (glibc's log, cos, expm1, sqrt in both).
 """
 
 from __future__ import annotations
@@ -307,20 +314,20 @@ def test_turn_on_bias_scale_factor_misalignment_closed_form(fmu_dir):
         assert np.allclose(y[1:, 3 * s:3 * s + 3], expected, rtol=1e-14, atol=1e-18)
         assert np.allclose(y[0, 3 * s:3 * s + 3], IM @ us, rtol=1e-14, atol=1e-18)  # t0: no step, no bias
         assert np.allclose(y[:, 6 + 3 * s:9 + 3 * s], b_on, rtol=1e-15, atol=0)
-    # the drawn constants are N(fixed, sigma): over 2000 seeds
-    draws = np.array([ImuErrorsTwin({**p, "seed": k}).constants[1]["turn_on"] for k in range(2000)]) / deg_h
-    assert draws.mean() == pytest.approx(10.0, abs=4 * 4.0 / math.sqrt(2000))
-    assert draws.std() == pytest.approx(4.0, rel=0.05)
+    # the drawn constants are N(fixed, sigma): over 1000 seeds (std within 8 %: 3.6 sigma)
+    draws = np.array([ImuErrorsTwin({**p, "seed": k}).constants[1]["turn_on"] for k in range(1000)]) / deg_h
+    assert draws.mean() == pytest.approx(10.0, abs=4 * 4.0 / math.sqrt(1000))
+    assert draws.std() == pytest.approx(4.0, rel=0.08)
 
 
 # ---- time robustness -------------------------------------------------------------------------
 
 def test_same_noise_whether_the_master_computes_n_h_or_accumulates(fmu_dir):
     """t = n h and t += h (float accumulation, as OMSimulator and FMPy's container) give the same
-    sample index k = n up to 1e7 steps of 5 ms and 1 ms, so the FMU's outputs at a given point
+    sample index k = n (checked to 2e6 steps of 5 ms and 1 ms, 2.8 h at 200 Hz), so the FMU's outputs at a given point
     are the same doubles."""
     for h in (5e-3, 1e-3):
-        n = 10_000_000
+        n = 2_000_000
         acc = np.cumsum(np.full(n, h))  # sequential sums: t += h
         assert np.array_equal(sample_index(acc, 0.0, h), np.arange(1, n + 1))
         assert np.array_equal(sample_index(np.arange(1, n + 1) * h, 0.0, h), np.arange(1, n + 1))
