@@ -383,3 +383,28 @@ def test_a_negative_noise_density_is_one_line_and_exit_2(fmu_dir, tmp_path, sett
     name, value = setting.removeprefix("imu.").split("=")
     with pytest.raises(ValueError, match=name):
         ImuErrorsTwin({name: float(value)})
+
+
+# ---- an independent importer --------------------------------------------------------------------
+
+def test_libcosim_gives_the_twins_numbers(fmu_dir):
+    """libcosim (the OSP engine, through libcosimpy) steps the FMU at its integer-nanosecond
+    times t_k = k h_ns / 1e9 with steps t_k+1 - t_k that differ from 1 ms by an ulp now and
+    then; the twin fed the same times gives the same doubles: the exact discretisation uses
+    the step actually taken and the sample index is the step number."""
+    pytest.importorskip("libcosimpy", reason="libcosimpy is not installed")
+    from test_libcosim import STEP_NS, LibcosimRun
+
+    n = 1000
+    params = {**ALL_ERRORS, "seed": 5}
+    lib = LibcosimRun()
+    lib.add("imu", fmu_dir / "ImuErrors.fmu", {k: v for k, v in params.items()})
+    for v in MEASURED:
+        lib.observe("imu", v)
+    lib.run(n)
+    t = np.array([(k * STEP_NS) / 1e9 for k in range(n + 1)])
+    h = np.concatenate([[0.0], np.diff(t)])
+    assert len(set(h[1:])) > 1  # the steps are not all the same double
+    twin = ImuErrorsTwin(params).run(t, h, np.zeros((n + 1, 3)), np.zeros((n + 1, 3)))
+    for v in MEASURED:
+        assert np.array_equal(lib.samples("imu", v, n), twin[v]), v
