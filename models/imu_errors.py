@@ -23,8 +23,8 @@ in m/s2), axis ``i`` of x, y, z, with the increment ``u`` over ``[t - h, t]``::
 sensor-axes matrix of the IMU error model in Groves (2013), *Principles of GNSS, Inertial, and
 Multisensor Integrated Navigation Systems*, 2nd ed., ch. 4: ``m_ij`` is the angle (rad) by which
 sensitive axis ``i`` leans towards body axis ``j``; a triad rotated by the small angles phi
-measures ``(I - [phi x]) u`` (``m = -[phi x]``), non-orthogonal axes need all six. With every error zero ``y_i = u_i`` bit for
-bit (the sum is only added where it is non-zero).
+measures ``(I - [phi x]) u`` (``m = -[phi x]``), non-orthogonal axes need all six. With every
+error zero ``y_i = u_i`` bit for bit (the sum is only added where it is non-zero).
 
 Bias instability: a first-order Gauss-Markov (GM) process per axis,
 ``db/dt = -b / Tc + sqrt(2 sigma_b^2 / Tc) w(t)``, stationary from the start
@@ -97,7 +97,8 @@ SensorNoise's with the period equal to the step: ``k = max(floor((t - t0) / h + 
 (``STEP_TOLERANCE``), which is the step number ``n`` whether the master computes ``t = t0 + n h``
 or accumulates ``t += h`` (they differ by < 2e-3 h up to 1e7 steps). The step must not grow
 during a run (k would repeat a used sample: an error); railfmu's masters, FMPy and libcosim
-step at a fixed ``h``.
+step at a fixed ``h`` (libcosim's nanosecond clock makes it vary by an ulp: k still counts the
+steps, and each step is discretised with the ``h`` it took).
 
 Memory: the GM states at ``t`` (``*_in_run_bias_*``) and at the previous communication point
 (``*_in_run_bias_before_*``), ``sample`` and ``sample_time`` are outputs, so fmi2GetFMUstate keeps
