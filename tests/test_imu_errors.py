@@ -277,6 +277,28 @@ def test_allan_deviation_reads_back_the_grade(fmu_dir, grade):
         assert b_meas == pytest.approx(b_par, rel=0.10), (grade, col, b_meas / b_par)
 
 
+def test_increments_integrate_the_reported_bias_state(fmu_dir):
+    """Bias instability alone, at rest: each increment is the integral of the GM bias whose
+    values at both ends the FMU reports, so y - h (b_before + b) / 2 is the trapezoid's error,
+    a Brownian-bridge term of standard deviation q h^1.5 / sqrt(12) (q^2 = 2 sigma_b^2 / Tc,
+    h << Tc); its mean is 0."""
+    p = {**GRADES["ideal"], "gyro_bias_instability_deg_h": 6.0, "gyro_bias_correlation_time": 40.0,
+         "accel_bias_instability_ug": 50.0, "accel_bias_correlation_time": 10.0, "seed": 3}
+    h, n = 0.1, 4000
+    names = MEASURED + [f"{s}_in_run_bias{b}_{a}" for s in ("gyro", "accel") for b in ("_before", "")
+                        for a in "xyz"]
+    y = _fmu_run(fmu_dir / "ImuErrors.fmu", p, np.arange(n + 1) * h, h, np.zeros((n + 1, 6)), names)[1:]
+    for s, (sensor, bi, tc) in enumerate((("gyro", 6.0 * GYRO_BIAS_SI, 40.0), ("accel", 50.0 * ACCEL_SI, 10.0))):
+        q = GM_SIGMA_PER_B * bi * math.sqrt(2 / tc)
+        before, after = y[:, 6 + 6 * s:9 + 6 * s], y[:, 9 + 6 * s:12 + 6 * s]
+        assert np.array_equal(before[1:], after[:-1])  # the memory hands the state on
+        r = y[:, 3 * s:3 * s + 3] - h * (before + after) / 2
+        sd = q * h**1.5 / math.sqrt(12)
+        assert np.all(np.abs(r.std(axis=0) / sd - 1) < 0.08), r.std(axis=0) / sd
+        assert np.all(np.abs(r.mean(axis=0)) < 4 * sd / math.sqrt(n))
+        assert np.all(np.abs(after).max(axis=0) > 2 * GM_SIGMA_PER_B * bi)  # the bias did wander
+
+
 # ---- deterministic errors: closed forms ------------------------------------------------------
 
 def test_turn_on_bias_scale_factor_misalignment_closed_form(fmu_dir):
