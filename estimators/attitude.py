@@ -67,6 +67,20 @@ def quat_from_rotvec(x: float, y: float, z: float) -> tuple[float, float, float,
     return c, s * x, s * y, s * z
 
 
+def quat_increment_from_rotvec(x: float, y: float, z: float) -> tuple[float, float, float, float]:
+    """:func:`quat_from_rotvec` minus the identity quaternion, ``(cos(a/2) - 1, ...)``, each part
+    to full relative precision: a small rotation added to an attitude as a compensated sum."""
+    a2 = x * x + y * y + z * z
+    if a2 < 1e-4:
+        c = -a2 / 8.0 + a2 * a2 / 384.0
+        s = 0.5 - a2 / 48.0 + a2 * a2 / 3840.0
+    else:
+        a = math.sqrt(a2)
+        c = -2.0 * math.sin(0.25 * a) ** 2
+        s = math.sin(0.5 * a) / a
+    return c, s * x, s * y, s * z
+
+
 def perturb(C, error_n) -> np.ndarray:
     """The attitude C_b^n rotated by a small error: exp([e x]) C_b^n, ``e = (e_N, e_E, e_D)``
     (rad) a rotation vector in NED. ``e_N``, ``e_E`` are the tilt errors, ``e_D`` the heading

@@ -42,7 +42,7 @@ import math
 
 import numpy as np
 
-from estimators.attitude import quat_from_rotvec, quat_from_rph, rph_from_quat
+from estimators.attitude import quat_from_rph, quat_increment_from_rotvec, rph_from_quat
 from models import earth
 
 _A, _E2, _RATE = earth.A, earth.E2, earth.RATE
@@ -63,7 +63,7 @@ class Strapdown:
     """
 
     __slots__ = ("dt", "lat", "lon", "h", "c_lat", "c_lon", "c_h", "lat_prev", "vn", "ve", "vd",
-                 "q0", "q1", "q2", "q3", "pa", "pu")
+                 "q0", "q1", "q2", "q3", "c_q0", "c_q1", "c_q2", "c_q3", "pa", "pu")
 
     def __init__(self, lat: float, lon: float, height: float, v_ned, q, dt: float) -> None:
         if not (math.isfinite(dt) and dt > 0):
@@ -77,6 +77,7 @@ class Strapdown:
         q = np.asarray(q, dtype=float)
         q = q / np.linalg.norm(q)
         self.q0, self.q1, self.q2, self.q3 = (float(x) for x in q)
+        self.c_q0 = self.c_q1 = self.c_q2 = self.c_q3 = 0.0
         self.pa = (0.0, 0.0, 0.0)
         self.pu = (0.0, 0.0, 0.0)
 
@@ -182,19 +183,30 @@ class Strapdown:
         t = lon + y
         self.c_lon = (t - lon) - y
         self.lon = t
-        # attitude: q(k) = conj(q(zeta)) q(k-1) q(phi)
-        a0, a1, a2, a3 = quat_from_rotvec(px, py, pz)
-        r0 = q0 * a0 - q1 * a1 - q2 * a2 - q3 * a3
-        r1 = q0 * a1 + q1 * a0 + q2 * a3 - q3 * a2
-        r2 = q0 * a2 - q1 * a3 + q2 * a0 + q3 * a1
-        r3 = q0 * a3 + q1 * a2 - q2 * a1 + q3 * a0
-        n0, n1, n2, n3 = quat_from_rotvec(zn, ze, zd)
-        q0 = n0 * r0 + n1 * r1 + n2 * r2 + n3 * r3
-        q1 = n0 * r1 - n1 * r0 - n2 * r3 + n3 * r2
-        q2 = n0 * r2 + n1 * r3 - n2 * r0 - n3 * r1
-        q3 = n0 * r3 - n1 * r2 + n2 * r1 - n3 * r0
-        k = 1.5 - 0.5 * (q0 * q0 + q1 * q1 + q2 * q2 + q3 * q3)
-        self.q0, self.q1, self.q2, self.q3 = q0 * k, q1 * k, q2 * k, q3 * k
+        # attitude: q(k) = conj(q(zeta)) q(k-1) q(phi), as q(k-1) + (the change), compensated
+        a0, a1, a2, a3 = quat_increment_from_rotvec(px, py, pz)
+        d0 = q0 * a0 - q1 * a1 - q2 * a2 - q3 * a3
+        d1 = q0 * a1 + q1 * a0 + q2 * a3 - q3 * a2
+        d2 = q0 * a2 - q1 * a3 + q2 * a0 + q3 * a1
+        d3 = q0 * a3 + q1 * a2 - q2 * a1 + q3 * a0
+        r0, r1, r2, r3 = q0 + d0, q1 + d1, q2 + d2, q3 + d3
+        n0, n1, n2, n3 = quat_increment_from_rotvec(zn, ze, zd)
+        y = d0 + n0 * r0 + n1 * r1 + n2 * r2 + n3 * r3 - self.c_q0
+        t = q0 + y
+        self.c_q0 = (t - q0) - y
+        self.q0 = t
+        y = d1 + n0 * r1 - n1 * r0 - n2 * r3 + n3 * r2 - self.c_q1
+        t = q1 + y
+        self.c_q1 = (t - q1) - y
+        self.q1 = t
+        y = d2 + n0 * r2 + n1 * r3 - n2 * r0 - n3 * r1 - self.c_q2
+        t = q2 + y
+        self.c_q2 = (t - q2) - y
+        self.q2 = t
+        y = d3 + n0 * r3 - n1 * r2 + n2 * r1 - n3 * r0 - self.c_q3
+        t = q3 + y
+        self.c_q3 = (t - q3) - y
+        self.q3 = t
 
     def rph(self) -> tuple[float, float, float]:
         """(roll, pitch, heading) (rad) of the current attitude; heading in (-pi, pi]."""
