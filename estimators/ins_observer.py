@@ -184,8 +184,8 @@ class StrapdownINS(Observer):
             bad = np.flatnonzero((np.abs(steps - np.round(steps)) > 1e-6) | (np.round(steps) < 1))
             if bad.size:
                 k = int(bad[0])
-                raise ValueError(f"{path}: line {lines[k + 1]}, column time_s: {t[k + 1]!r} is not a whole number (>= 1) of "
-                                 f"IMU intervals ({self.dt!r} s) after {t[k]!r}")
+                raise ValueError(f"{path}: line {lines[k + 1]}, column time_s: {float(t[k + 1])!r} is not a whole "
+                                 f"number of IMU intervals ({self.dt!r} s) after {float(t[k])!r}")
         return t, self.run(t, np.empty((t.shape[0], 0)), inc)
 
 
@@ -228,9 +228,9 @@ def read_imu_csv(path: str | Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     finite = np.isfinite(data)
     if not finite.all():
         k, j = np.argwhere(~finite)[0]
-        raise ValueError(f"{path}: line {lines[k]}, column {names[j]}: not a finite number: {data[k, j]!r}")
+        raise ValueError(f"{path}: line {lines[k]}, column {names[j]}: not a finite number: {float(data[k, j])!r}")
     if data.shape[0] > 1 and np.any(np.diff(data[:, 0]) <= 0):
         k = int(np.flatnonzero(np.diff(data[:, 0]) <= 0)[0])
-        raise ValueError(f"{path}: line {lines[k + 1]}, column time_s: {data[k + 1, 0]!r} does not increase "
-                         f"after {data[k, 0]!r}")
+        raise ValueError(f"{path}: line {lines[k + 1]}, column time_s: {float(data[k + 1, 0])!r} does not increase "
+                         f"after {float(data[k, 0])!r}")
     return data[:, 0], data[:, 1:], np.array(lines, dtype=int)
