@@ -7,6 +7,15 @@ increments over the IMU interval that *ends* at the sample time (body forward-ri
 No measurements. Outputs: ``latitude, longitude`` (rad), ``height`` (m), ``vn, ve, vd`` (m/s),
 ``roll, pitch, heading`` (rad).
 
+Offline on a user's data (``imu.csv`` and, for the initial state, ``truth.csv``; the formats of
+the trolley survey)::
+
+    ins = StrapdownINS(0.005, **initial_state_from_truth_csv("truth.csv"), heading_error=1e-3)
+    t, nav = ins.run_imu_csv("imu.csv")        # nav: (n, 9), columns NAV
+
+A bad file raises ``ValueError`` with one line naming file, line and column (estimators do
+not import ``fmus``; the experiment that calls this turns it into a ``UserError``, exit 2).
+
 The observer's ``dt`` is the IMU interval. The first sample (time ``t0``) carries the interval
 *before* the initial state: it only primes the coning and sculling terms. A sample whose
 input is missing (NaN), or a skipped sample time, is bridged by holding the last increment
@@ -234,3 +243,43 @@ def read_imu_csv(path: str | Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         raise ValueError(f"{path}: line {lines[k + 1]}, column time_s: {float(data[k + 1, 0])!r} does not increase "
                          f"after {float(data[k, 0])!r}")
     return data[:, 0], data[:, 1:], np.array(lines, dtype=int)
+
+
+#: ``truth.csv`` columns that give the INS its initial state, with their factor to SI/rad
+_TRUTH_START = {"lat_deg": ("latitude", math.pi / 180), "lon_deg": ("longitude", math.pi / 180),
+                "height_m": ("height", 1.0), "vn": ("vn", 1.0), "ve": ("ve", 1.0), "vd": ("vd", 1.0),
+                "roll_deg": ("roll", math.pi / 180), "pitch_deg": ("pitch", math.pi / 180),
+                "heading_deg": ("heading", math.pi / 180)}
+
+
+def initial_state_from_truth_csv(path: str | Path, time_s: float | None = None) -> dict[str, float]:
+    """The :class:`StrapdownINS` settings of the initial state (rad, m, m/s) from a
+    ``truth.csv`` (``time_s, lat_deg, lon_deg, height_m, vn, ve, vd, roll_deg, pitch_deg,
+    heading_deg, ...``): its row at ``time_s`` (default: the first row). ValueError (one line,
+    file and column) if a column is missing, a cell is not a number or no row has that time."""
+    path = Path(path)
+    try:
+        f = open(path, newline="")
+    except OSError as e:
+        raise ValueError(f"{path}: cannot read ({e.strerror})") from None
+    with f:
+        reader = csv.reader(f)
+        header = [h.strip() for h in next(reader, [])]
+        missing = [c for c in ("time_s", *_TRUTH_START) if c not in header]
+        if missing:
+            raise ValueError(f"{path}: no column(s) {', '.join(missing)} "
+                             f"(the header has {', '.join(header) or 'nothing'})")
+        for line, r in enumerate(reader, start=2):
+            if not r or all(not x.strip() for x in r):
+                continue
+            values = {}
+            for c in ("time_s", *_TRUTH_START):
+                cell = r[header.index(c)].strip() if header.index(c) < len(r) else ""
+                try:
+                    values[c] = float(cell)
+                except ValueError:
+                    raise ValueError(f"{path}: line {line}, column {c}: not a number: {cell!r}") from None
+            if time_s is None or abs(values["time_s"] - time_s) <= 1e-9 * max(1.0, abs(time_s)):
+                return {name: values[c] * k for c, (name, k) in _TRUTH_START.items()}
+    raise ValueError(f"{path}: column time_s: no row at {time_s!r} s" if time_s is not None
+                     else f"{path}: no data rows")

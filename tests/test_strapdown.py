@@ -18,7 +18,7 @@ import pytest
 
 from estimators.attitude import (coarse_alignment, coarse_heading_sigma, dcm_from_rph, dcm_from_rotvec, perturb,
                                  quat_from_rotvec, quat_increment_from_rotvec, rph_from_dcm)
-from estimators.ins_observer import INCREMENTS, StrapdownINS, read_imu_csv
+from estimators.ins_observer import INCREMENTS, StrapdownINS, initial_state_from_truth_csv, read_imu_csv
 from estimators.strapdown import NAV, Strapdown
 from models import earth
 
@@ -140,8 +140,9 @@ def coning_increments(beta, W, n, dt=DT):
     f_n0 = earth_turn.apply([0, 0, -G_LAT])                              # exp([W_ie t x]) g_f
     f_b = cone.apply(f_n0 @ C0, inverse=True).reshape(tau.shape + (3,))  # R_cone^T C0^T (...)
     dv = 0.5 * dt * np.einsum("j,kjx->kx", GL[1], f_b)
-    C_true = (Rotation.from_rotvec(np.outer(-t[2:], earth.earth_rate_n(LAT))).as_matrix() @ C0
-              @ Rotation.from_rotvec(beta * np.stack([0 * t[2:], np.cos(W * t[2:]), np.sin(W * t[2:])], -1)).as_matrix())
+    tk = t[2:]
+    C_true = (Rotation.from_rotvec(np.outer(-tk, earth.earth_rate_n(LAT))).as_matrix() @ C0
+              @ Rotation.from_rotvec(beta * np.stack([0 * tk, np.cos(W * tk), np.sin(W * tk)], -1)).as_matrix())
     return np.concatenate([dth, dv], 1), C0 @ dcm_from_rotvec(beta * np.array([0, 1, 0])), C_true
 
 
@@ -410,7 +411,8 @@ def _cell(lines, j, text, line=4):
     (lambda lines: [lines[0].replace(",dv_y", ",dv_q")] + lines[1:], r"imu\.csv: no column\(s\) dv_y"),
     (lambda lines: _cell(lines, 2, "abc"), r"imu\.csv: line 4, column dtheta_y: not a number: 'abc'"),
     (lambda lines: _cell(lines, 6, ""), r"imu\.csv: line 4, column dv_z: not a number: ''"),
-    (lambda lines: lines[:3] + [lines[3].rsplit(",", 1)[0]] + lines[4:], r"imu\.csv: line 4, column dv_z: not a number: ''"),
+    (lambda lines: lines[:3] + [lines[3].rsplit(",", 1)[0]] + lines[4:],
+     r"imu\.csv: line 4, column dv_z: not a number: ''"),
     (lambda lines: _cell(lines, 1, "nan"), r"imu\.csv: line 4, column dtheta_x: not a finite number"),
     (lambda lines: _cell(lines, 0, "0.005"), r"imu\.csv: line 4, column time_s: 0\.005 does not increase"),
     (lambda lines: _cell(lines, 0, "0.0125"), r"imu\.csv: line 4, column time_s: 0\.0125 is not a whole number"),
@@ -429,3 +431,19 @@ def test_imu_csv_bad_input_one_line(tmp_path, edit, message):
     assert "\n" not in str(info.value)
     with pytest.raises(ValueError, match="cannot read"):
         read_imu_csv(tmp_path / "missing.csv")
+
+
+def test_initial_state_from_truth_csv(tmp_path):
+    header = "time_s,lat_deg,lon_deg,height_m,vn,ve,vd,roll_deg,pitch_deg,heading_deg,distance_m,stopped"
+    (tmp_path / "truth.csv").write_text(header + "\n0,30.5,114.3,25,0,0,0,0.1,-0.2,45,0,1\n"
+                                        "0.005,30.5,114.3,25,0.001,0.001,0,0.1,-0.2,45,0,0\n")
+    s = initial_state_from_truth_csv(tmp_path / "truth.csv")
+    assert s == pytest.approx(dict(latitude=LAT, longitude=LON, height=H, vn=0, ve=0, vd=0, roll=0.1 * DEG,
+                                   pitch=-0.2 * DEG, heading=45 * DEG), rel=1e-15)
+    assert initial_state_from_truth_csv(tmp_path / "truth.csv", 0.005)["vn"] == 0.001
+    StrapdownINS(DT, **s)
+    with pytest.raises(ValueError, match=r"truth\.csv: column time_s: no row at 1\.0 s"):
+        initial_state_from_truth_csv(tmp_path / "truth.csv", 1.0)
+    (tmp_path / "truth.csv").write_text(header.replace("pitch_deg", "pitch") + "\n0,1,2,3,4,5,6,7,8,9,10,0\n")
+    with pytest.raises(ValueError, match=r"truth\.csv: no column\(s\) pitch_deg"):
+        initial_state_from_truth_csv(tmp_path / "truth.csv")
