@@ -135,18 +135,20 @@ class Strapdown:
         lm = 1.5 * lat - 0.5 * self.lat_prev
         s = math.sin(lm)
         c = math.cos(lm)
+        tl = s / c
         x = 1.0 - _E2 * s * s
-        re = _A / math.sqrt(x)
+        sx = math.sqrt(x)
+        re = _A / sx
         rn = re * (1.0 - _E2) / x
         wn = _RATE * c
         wd = -_RATE * s
-        g0 = _GE * (1.0 + _K * s * s) / math.sqrt(x)
+        g0 = _GE * (1.0 + _K * s * s) / sx
         # predictor for the mid-interval velocity and height (Coriolis, transport rate, gravity)
         rr = 1.0 / (re + hh)
         rt = 1.0 / (rn + hh)
         tn = 2.0 * wn + ve * rr
         te = -vn * rt
-        td = 2.0 * wd - ve * s / c * rr
+        td = 2.0 * wd - ve * tl * rr
         g = g0 * (1.0 - 2.0 * (hh - 0.5 * vd * h) / _A)
         vnm = vn + 0.5 * (fn - (te * vd - td * ve) * h)
         vem = ve + 0.5 * (fe - (td * vn - tn * vd) * h)
@@ -156,7 +158,7 @@ class Strapdown:
         rt = 1.0 / (rn + hm)
         rho_n = vem * rr
         rho_e = -vnm * rt
-        rho_d = -rho_n * s / c
+        rho_d = -rho_n * tl
         g = g0 * (1.0 - 2.0 * hm / _A)
         # n-frame rotation over the interval, and the specific force rotated into n(k)
         zn = (wn + rho_n) * h
