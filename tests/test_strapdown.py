@@ -447,3 +447,22 @@ def test_initial_state_from_truth_csv(tmp_path):
     (tmp_path / "truth.csv").write_text(header.replace("pitch_deg", "pitch") + "\n0,1,2,3,4,5,6,7,8,9,10,0\n")
     with pytest.raises(ValueError, match=r"truth\.csv: no column\(s\) pitch_deg"):
         initial_state_from_truth_csv(tmp_path / "truth.csv")
+
+
+def test_observer_binds_as_an_ssd_observer():
+    """What an SSD's rf:Observer gives the bank: the class path, scalar settings (strings for
+    ``alignment``), the six increments as known inputs; every unit is one the bank knows."""
+    from experiments.observers import make_observer
+    from fmus.cosim.system import ObserverSpec
+    from fmus.errors import UserError
+    from fmus.ssp.units import OURS
+    spec = ObserverSpec(name="ins", cls="estimators.ins_observer.StrapdownINS",
+                        inputs={k: f"trolley.{k}" for k in INCREMENTS},
+                        settings={**SETTINGS, "heading_error": HEADING, "alignment": "given"})
+    obs, stride = make_observer(spec, DT, "trolley_survey")
+    assert isinstance(obs, StrapdownINS) and stride == 1
+    assert all(OURS.get(u) is not None for u in obs.units.values())
+    assert set(obs.units) == {*INCREMENTS, *NAV}
+    spec.settings["alignment"] = "fine"
+    with pytest.raises(UserError, match="bad settings: StrapdownINS: alignment must be"):
+        make_observer(spec, DT, "trolley_survey")
