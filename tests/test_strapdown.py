@@ -82,7 +82,8 @@ def test_attitude_conventions():
 # -- exact data ---------------------------------------------------------------------------------
 def test_at_rest_on_the_ellipsoid_700s():
     """Exact increments at rest, 200 Hz, 700 s (the length of the survey run): the INS stays
-    put to well below a micrometre and a nanoradian."""
+    put below a micrometre and a nanoradian (measured 0.33 um, 1.4e-9 m/s, 3e-13 rad: the
+    rounding of 140,000 steps)."""
     C = dcm_from_rph(0.01, -0.02, 45 * DEG)
     n = 140_000
     out = run_ins(at_rest(C, n), C=C)
