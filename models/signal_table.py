@@ -7,6 +7,7 @@ SSP, like any other FMU; other tools (libcosim, OMSimulator) run it too.
 The file (parameter ``file``: an absolute path, or relative to the FMU's ``resources/``)::
 
     time,position,speed,gnss_valid,regime      <- header: first column "time" (s), then names
+                                                  ("time_s" too: the standard imu.csv, truth.csv)
     0.0,0.0,0.0,1,0
     1.0,0.5,1.0,1,1
 
@@ -76,7 +77,7 @@ def build() -> Model:
         Parameter("after_end", "After the table's last time: 0 = hold the last row, 1 = end the "
                   "co-simulation there (fmi2Discard, fmi2Terminated)", start=0, type="Integer",
                   min=0, max=1, source=src),
-        Parameter("file", "CSV table: header line with 'time' (s) first, then named columns; an "
+        Parameter("file", "CSV table: header line with 'time' or 'time_s' (s) first, then named columns; an "
                   "absolute path or relative to the FMU's resources/ (example.csv is shipped); "
                   "empty = no table, every channel 0", start="", type="String", source=src),
     ]

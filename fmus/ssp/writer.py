@@ -264,6 +264,8 @@ def _system_annotations(sys_el, system: System) -> None:
                     _sub(el, tag, name=k, connector=ref, valid=o.valid.get(k) if tag == "rf:Measurement" else None)
             for k, v in o.settings.items():
                 _sub(el, "rf:Setting", name=k, value=str(v).lower() if isinstance(v, bool) else str(v))
+            for k, ref in o.setting_signals.items():
+                _sub(el, "rf:Setting", name=k, connector=ref)
     if system.record:
         recorder = _sub(_sub(annotations, "ssc:Annotation", type="org.railfmu.recorder"), "rf:Recorder")
         for ref in system.record:

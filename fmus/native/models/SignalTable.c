@@ -234,8 +234,9 @@ static int load(ModelInstance *m, Table *d, const char *path) {
             header[j]++;
         }
     }
-    if (strcmp(header[0], "time") != 0) {
-        model_error(m, "file %s, line 1, column 1: the first column must be 'time' (s), not '%s'",
+    /* "time_s": the trolley survey's standard imu.csv and truth.csv */
+    if (strcmp(header[0], "time") != 0 && strcmp(header[0], "time_s") != 0) {
+        model_error(m, "file %s, line 1, column 1: the first column must be 'time' or 'time_s' (s), not '%s'",
                     path, header[0]);
         goto done;
     }
