@@ -38,6 +38,7 @@ from pathlib import Path
 import numpy as np
 
 from experiments.study_protocol import RunData, Study, observers_md, output, parameter
+from fmus.errors import UserError
 
 NAV = ("latitude", "longitude", "height", "vn", "ve", "vd", "roll", "pitch", "heading")
 INCREMENTS = ("dtheta_x", "dtheta_y", "dtheta_z", "dv_x", "dv_y", "dv_z")
@@ -143,7 +144,7 @@ def track_geometry(roles: dict):
     from models.track_geometry import DEFAULT_TRACK, TrackGeometry
 
     params = {k: roles[f"track_{k}"] for k in GEOMETRY if k != "track_file"}
-    name = str(roles["track_file"])
+    name = str(roles["track_track_file"])
     table = Path(name) if Path(name).is_absolute() else DEFAULT_TRACK.parent / name
     return TrackGeometry(params, table, DEFAULT_TRACK.parent)
 
@@ -185,7 +186,7 @@ class TrolleySurvey(Study):
             ax[2].plot(grid, 1e3 * yz[:, 0], lw=0.8, label="alignment (right +)")
             ax[2].plot(grid, 1e3 * yz[:, 1], lw=0.8, label="level (down +)")
             ax[2].legend(fontsize=8)
-        except Exception as exc:  # a user's track table the twin cannot read: the figure says so
+        except (UserError, ValueError, OSError) as exc:  # a table the twin cannot read: the figure says so
             ax[2].text(0.5, 0.5, f"irregularities not available: {exc}", ha="center", transform=ax[2].transAxes)
         ax[2].set(xlabel="distance along the track [m]", ylabel="[mm]", title="Irregularities")
         for a in ax:
