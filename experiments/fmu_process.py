@@ -1,0 +1,86 @@
+r"""``ukf_fmu``: the running-resistance UKF of Cunillera et al. (2022) with a vehicle FMU as its
+process model.
+
+:class:`FmuPaperUKF` is :class:`estimators.running_resistance.PaperUKF` (state
+``(s, v, r0, r1, r2)``, effort from the measured acceleration, Merwe points α = 1e-3, κ = −2,
+Table 1, Q = 0) whose prediction ``Y_i = f(X_i, u, t, dt)`` is one step of the
+``TrainLongitudinal`` FMU per sigma point (:class:`fmus.cosim.process_model.FmuProcessModel`:
+FMU state saved at ``t``, restored for each point)::
+
+    s_set, v_set, r0, r1, r2 := X_i       set_state = true: the step starts from (s_set, v_set)
+    effort_set := u                       use_effort_set = true: f_t - f_b = u over the step
+    fmi2DoStep(t, dt)                     eq. 1 by the FMU's RK4 (sub-steps of integrator_step)
+    Y_i = (s, v, r0, r1, r2)              the Davis coefficients are constant (Q = 0)
+
+It is what lets a user estimate with their own vehicle FMU: any FMU with these inputs and
+outputs can be named. ``estimators/`` does not import ``fmus/``: the experiment layer builds
+the process model and hands it in.
+
+In an SSD (``org.railfmu.observers``) the observer names the system component whose FMU and
+parameters (its line profile, masses, integrator step) the process model uses::
+
+    <rf:Observer name="ukf_fmu" class="experiments.fmu_process.FmuPaperUKF"
+                 sampling="event" samplePeriod="10">
+      <rf:Measurement name="position" connector="gnss.position" valid="gnss.valid"/>
+      <rf:Measurement name="speed" connector="gnss.speed" valid="gnss.valid"/>
+      <rf:Setting name="process_component" value="train"/>
+    </rf:Observer>
+
+The observer's ``line_file`` and ``rotating_mass_factor`` (its line term ``g(s)`` for the
+effort) default to the component's, so filter and FMU use the same line.
+"""
+
+from __future__ import annotations
+
+from typing import Any, ClassVar
+
+from estimators.running_resistance import PaperUKF
+from fmus.cosim.process_model import FmuProcessModel
+from fmus.cosim.system import Component
+from fmus.errors import UserError
+
+#: TrainLongitudinal's process-model variables for the rows (s, v, r0, r1, r2) of PaperUKF:
+#: (input, output); output None: held over the step
+TRAIN_COLUMNS = (("s_set", "s"), ("v_set", "v"), ("r0", None), ("r1", None), ("r2", None))
+
+
+class FmuPaperUKF(PaperUKF):
+    """:class:`PaperUKF` with ``process`` an :class:`FmuProcessModel` of the component named by
+    the setting ``process_component`` (module docstring). Diagnostics beside PaperUKF's: the
+    process model's ``process_steps``, ``process_sigma_points``, ``process_seconds`` and
+    ``process_us_per_step`` (µs per filter prediction, all sigma points)."""
+
+    process_columns: ClassVar[tuple[tuple[str, str | None], ...]] = TRAIN_COLUMNS
+    process_known: ClassVar[tuple[str, ...]] = ("effort_set",)
+    process_fixed: ClassVar[dict[str, bool]] = {"set_state": True, "use_effort_set": True}
+
+    def __init__(self, dt: float, process: FmuProcessModel | None = None, **settings: Any) -> None:
+        if not isinstance(process, FmuProcessModel):
+            raise ValueError("needs the setting process_component naming the system component whose FMU is "
+                             "its process model")
+        if "line_file" not in settings:
+            settings["line_file"] = str(process.resource(str(process.value("line_file"))))
+        settings.setdefault("rotating_mass_factor", float(process.value("rotating_mass_factor")))
+        super().__init__(dt, process=process, **settings)
+
+    def finish(self) -> dict:
+        p = self.process
+        return {**super().finish(), "process_steps": p.steps, "process_sigma_points": p.points,
+                "process_seconds": p.seconds,
+                "process_us_per_step": 1e6 * p.seconds / p.steps if p.steps else None}
+
+    def close(self) -> None:
+        """Free the process model's FMU instance (a later run creates it again)."""
+        self.process.close()
+
+
+def process_model(cls: type, component: Component, label: str) -> FmuProcessModel:
+    """The process model of observer class ``cls`` (its ``process_columns``, ``process_known``,
+    ``process_fixed``) on one extra instance of ``component``'s FMU with its parameters;
+    ``label`` names the observer in messages."""
+    columns = getattr(cls, "process_columns", None)
+    if columns is None:
+        raise UserError(f"{label}: {cls.__name__} takes no FMU process model (setting process_component)")
+    return FmuProcessModel(component.fmu, columns, getattr(cls, "process_known", ()),
+                           getattr(cls, "process_fixed", {}), component.parameters,
+                           name=f"{label.rpartition(': ')[2]} process model", md=component.md)
