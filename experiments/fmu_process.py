@@ -74,13 +74,16 @@ class FmuPaperUKF(PaperUKF):
         self.process.close()
 
 
-def process_model(cls: type, component: Component, label: str) -> FmuProcessModel:
+def process_model(cls: type, component: Component, label: str, name: str = "") -> FmuProcessModel:
     """The process model of observer class ``cls`` (its ``process_columns``, ``process_known``,
     ``process_fixed``) on one extra instance of ``component``'s FMU with its parameters;
-    ``label`` names the observer in messages."""
+    ``label`` (the SSD and observer) begins every error message, ``name`` names the instance."""
     columns = getattr(cls, "process_columns", None)
     if columns is None:
         raise UserError(f"{label}: {cls.__name__} takes no FMU process model (setting process_component)")
-    return FmuProcessModel(component.fmu, columns, getattr(cls, "process_known", ()),
-                           getattr(cls, "process_fixed", {}), component.parameters,
-                           name=f"{label.rpartition(': ')[2]} process model", md=component.md)
+    try:
+        return FmuProcessModel(component.fmu, columns, getattr(cls, "process_known", ()),
+                               getattr(cls, "process_fixed", {}), component.parameters,
+                               name=f"{name or cls.__name__} process model", md=component.md)
+    except UserError as exc:
+        raise UserError(f"{label}: process_component {component.name!r}: {exc}") from None

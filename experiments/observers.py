@@ -63,7 +63,7 @@ def make_observer(spec: ObserverSpec, step_size: float, where: str, system: Syst
     settings = dict(spec.settings)
     process = None
     if "process_component" in settings:
-        process = _process_model(cls, str(settings.pop("process_component")), system, label)
+        process = _process_model(cls, str(settings.pop("process_component")), system, label, spec.name)
         settings["process"] = process
     try:
         obs = cls(period, **settings)
@@ -87,7 +87,7 @@ def make_observer(spec: ObserverSpec, step_size: float, where: str, system: Syst
     return obs, stride
 
 
-def _process_model(cls, name: str, system: System | None, label: str):
+def _process_model(cls, name: str, system: System | None, label: str, observer: str):
     """An FMU process model on component ``name`` of ``system`` (experiments.fmu_process)."""
     from .fmu_process import process_model
 
@@ -97,7 +97,7 @@ def _process_model(cls, name: str, system: System | None, label: str):
         component = None
     if component is None:
         raise UserError(f"{label}: process_component {name!r} is not a component of the system")
-    return process_model(cls, component, label)
+    return process_model(cls, component, label, observer)
 
 
 def unit_map(spec: ObserverSpec, obs, kind: str, name: str, signal: str, where: str) -> tuple[float, float]:
