@@ -28,6 +28,15 @@ parameters (its line profile, masses, integrator step) the process model uses::
 
 The observer's ``line_file`` and ``rotating_mass_factor`` (its line term ``g(s)`` for the
 effort) default to the component's, so filter and FMU use the same line.
+
+The paper's effort (setting ``effort="paper"``, the default) inverts eq. 1 with eq. 4's
+constant acceleration: ``u = a_obs + r(v^) + g(s^)``. Under the FMU's eq. 1 the held ``u``
+does not reproduce the measured speed change (``r(v)`` grows while the train accelerates),
+and with Q = 0 the filter, sure of its state, does not correct it: on the driven 32 km run
+(seed 1) speed rms 0.81 km/h and position rms 79 m, against 0.28 km/h and 4.7 m with eq. 4.
+``effort="process"`` takes instead the effort whose prediction of the centre sigma point by
+the FMU reproduces the measured speed change (one secant step from the paper's effort: two
+more FMU steps per fix): 0.28 km/h and 4.9 m, as eq. 4.
 """
 
 from __future__ import annotations
@@ -54,14 +63,37 @@ class FmuPaperUKF(PaperUKF):
     process_known: ClassVar[tuple[str, ...]] = ("effort_set",)
     process_fixed: ClassVar[dict[str, bool]] = {"set_state": True, "use_effort_set": True}
 
-    def __init__(self, dt: float, process: FmuProcessModel | None = None, **settings: Any) -> None:
+    def __init__(self, dt: float, process: FmuProcessModel | None = None, effort: str = "paper",
+                 **settings: Any) -> None:
         if not isinstance(process, FmuProcessModel):
             raise ValueError("needs the setting process_component naming the system component whose FMU is "
                              "its process model")
+        if effort not in ("paper", "process"):
+            raise ValueError(f"effort must be 'paper' or 'process', not {effort!r}")
+        self.effort_rule = effort
         if "line_file" not in settings:
             settings["line_file"] = str(process.resource(str(process.value("line_file"))))
         settings.setdefault("rotating_mass_factor", float(process.value("rotating_mass_factor")))
         super().__init__(dt, process=process, **settings)
+
+    def _effort(self, v_meas: float, t: float) -> float:
+        """The paper's effort, or (``effort="process"``) the one whose FMU prediction of the
+        centre point ends at the measured speed change (module docstring)."""
+        u0 = super()._effort(v_meas, t)
+        if self.effort_rule == "paper" or self._v_meas is None or t <= self._t_meas or not self._pending:
+            return u0
+        x = (self.x * self.D)[None, :]
+        target = x[0, 1] + (v_meas - self._v_meas)
+
+        def miss(u: float) -> float:
+            X = x
+            for j in range(self._pending):
+                X = self.process(X, u, self._t_post + j * self.dt, self.dt)
+            return float(X[0, 1]) - target
+
+        u1 = u0 + 1e-3  # N/kg; v(t + dt) is affine in u while the train moves (slope dt)
+        m0, m1 = miss(u0), miss(u1)
+        return u0 if m1 == m0 else u1 - m1 * (u1 - u0) / (m1 - m0)  # at rest the held train: u0
 
     def finish(self) -> dict:
         p = self.process

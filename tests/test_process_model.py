@@ -155,22 +155,22 @@ def sigma_like_points(s=12000.0, v=25.0):
 
 
 def test_each_sigma_point_is_one_fmu_step_bit_for_bit(fmu_dir):
-    """Consecutive filter steps (the instance follows the filter's clock), a restarted
-    filter (back to t = 0: the instance is reset), efforts of both signs: every row equals
-    the twin started from it."""
+    """Consecutive filter steps (the instance follows the filter's clock), a second call at
+    the same time (from the snapshot), a restarted filter (back to t = 0: the instance is
+    reset), efforts of both signs: every row equals the twin started from it."""
     from fmus.cosim.process_model import FmuProcessModel
 
     pm = FmuProcessModel(fmu_dir / "TrainLongitudinal.fmu", TRAIN_COLUMNS, **PROCESS)
     twin = twin_process()
     X = sigma_like_points()
-    for t, u in [(0.0, 0.3), (10.0, -0.4), (20.0, 0.0), (0.0, 0.1), (10.0, 0.25)]:
+    for t, u in [(0.0, 0.3), (10.0, -0.4), (10.0, 0.2), (20.0, 0.0), (0.0, 0.1), (10.0, 0.25)]:
         Y = pm(X, u, t, 10.0)
         np.testing.assert_array_equal(Y, twin(X, u, t, 10.0))
         np.testing.assert_array_equal(Y[:, 2:], X[:, 2:])
         if u < 0:  # at rest under a brake: held, no roll-back (v = -1 mm/s ends at 0)
             np.testing.assert_array_equal(Y[-2:, :2], [[100.0, 0.0], [100.0, 0.0]])
     assert (Y[-2:, 1] > 0).all() and (Y[-2:, 0] > 100.0).all()  # traction > r0: they start
-    assert (pm.steps, pm.points) == (5, 5 * len(X))
+    assert (pm.steps, pm.points) == (6, 6 * len(X))
     pm.close()
     Y2 = pm(X, 0.25, 0.0, 10.0)  # a closed process model opens a new instance
     np.testing.assert_array_equal(Y2, Y)
@@ -288,6 +288,26 @@ def test_ukf_fmu_against_the_papers_discrete_process(fmu_dir, gnss_fixes):
     assert 3.6 * rms(D[:, 1] - v_true) < 0.35 and rms(D[:, 0] - s_true) < 6.0
     assert 0.6 < 3.6 * rms(E[:, 1] - v_true) < 1.0 and 50 < rms(E[:, 0] - s_true) < 110
     np.testing.assert_allclose(E[-1, 2:5], D[-1, 2:5], rtol=5e-3)
+    f.close()
+
+
+def test_ukf_fmu_with_the_effort_its_process_needs_tracks_as_eq_4(fmu_dir, gnss_fixes):
+    """effort="process": the effort whose FMU prediction of the centre point reproduces the
+    measured speed change. Measured: speed rms 0.28 km/h, position rms 4.9 m (eq. 4: 0.28 and
+    4.7), final r0-r2 within 1e-4 of eq. 4's; three FMU process calls per fix."""
+    from estimators.running_resistance import PaperUKF
+    from experiments.fmu_process import FmuPaperUKF, process_model
+
+    t, z, s_true, v_true = gnss_fixes
+    train = Component("train", fmu_dir / "TrainLongitudinal.fmu", {})
+    f = FmuPaperUKF(10.0, process=process_model(FmuPaperUKF, train, "x", "ukf_fmu"), effort="process")
+    E, D = f.run(t, z), PaperUKF(10.0).run(t, z)
+    assert 3.6 * np.sqrt(np.mean((E[:, 1] - v_true) ** 2)) < 0.35
+    assert np.sqrt(np.mean((E[:, 0] - s_true) ** 2)) < 6.0
+    np.testing.assert_allclose(E[-1, 2:5], D[-1, 2:5], rtol=1e-4)
+    assert f.finish()["process_steps"] == 3 * (len(t) - 1)
+    with pytest.raises(ValueError, match="effort must be 'paper' or 'process'"):
+        FmuPaperUKF(10.0, process=f.process, effort="measured")
     f.close()
 
 

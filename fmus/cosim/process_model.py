@@ -17,8 +17,9 @@ state of FMI 2.0 (section 2.1.8, ``canGetAndSetFMUstate``)::
         Y_i = the state outputs, X_i's held columns          = false: we go back)
 
 The last sigma point leaves the instance at ``t + dt``, where the next filter step takes its
-snapshot, so the instance follows the filter's clock; a call at another time (a restarted
-filter) resets the instance and initialises it there. The FMU takes a sigma point's state
+snapshot, so the instance follows the filter's clock; a second call at ``t`` (a filter that
+evaluates its process again, e.g. to find an input) restores the snapshot first; a call at
+any other time (a restarted filter) resets the instance and initialises it there. The FMU takes a sigma point's state
 through inputs (``TrainLongitudinal``: ``s_set``, ``v_set`` with ``set_state`` true): FMI 2.0
 lets an importer set a state only before initialisation ends. Columns of the filter state
 that the FMU takes as inputs but does not change (a Davis coefficient) are held: ``Y = X``.
@@ -95,6 +96,7 @@ class FmuProcessModel:
         self._md = slave.md
         self._initialised = False
         self._time: float | None = None  # the instance's time; None: (re)initialise at the next call
+        self._snap_time: float | None = None  # the time of the snapshot; None: none valid
         self._snapshot = fmi2FMUstate()  # NULL: fmi2GetFMUstate allocates it the first time
         f = slave.fmu
         # the calls of the inner loop, on ctypes arrays made once
@@ -135,6 +137,7 @@ class FmuProcessModel:
         s = self.slave
         if self._initialised:  # a filter restarted elsewhere, or a failed step: start again
             self._free_snapshot()
+            self._snap_time = None
             s.call("fmi2Reset", s.fmu.reset)
             self._initialised = False
         s.enter_initialization(t)
@@ -179,20 +182,29 @@ class FmuProcessModel:
             raise ValueError(f"{self.name}: known input of shape {u.shape}, expected ({len(self.known)},)")
         if not (dt > 0 and np.isfinite(dt)):
             raise ValueError(f"{self.name}: dt = {dt!r} must be a positive number of seconds")
-        if self._time is None or abs(t - self._time) > _SAME_TIME * dt:
+        if self._time is not None and abs(t - self._time) <= _SAME_TIME * dt:
+            restore = False  # the instance is at t (the previous call ended there)
+        elif self._snap_time is not None and abs(t - self._snap_time) <= _SAME_TIME * dt:
+            restore = True  # once more from the snapshot's time (e.g. an effort found by iteration)
+        else:
             self._start(float(t))
-        t_fmu = self._time
+            restore = False
+        t_fmu = self._snap_time if restore else self._time
         s, f, c = self.slave, self.slave.fmu, self._c
         Y = np.empty_like(X)
         Y[:, self._held_cols] = X[:, self._held_cols]
         n_msg = len(s.messages)
-        what = "setting the known inputs"
+        what, snapshot_at_t = "fmi2SetFMUstate", restore
         try:
+            if restore:
+                f.fmi2SetFMUstate(c, self._snapshot)
+            what = "setting the known inputs"
             if self.known:
                 self._known[:] = u.tolist()
                 f.fmi2SetReal(c, self._vr_known, len(self.known), self._known)
-            what = "fmi2GetFMUstate"
+            what, snapshot_at_t = "fmi2GetFMUstate", False
             f.fmi2GetFMUstate(c, ctypes.byref(self._snapshot))  # overwrites the previous snapshot
+            snapshot_at_t = True
             for i, row in enumerate(X.tolist()):
                 if i:
                     what = "fmi2SetFMUstate"
@@ -205,9 +217,10 @@ class FmuProcessModel:
                 f.fmi2GetReal(c, self._vr_out, len(self._out_cols), self._out)
                 Y[i, self._out_cols] = self._out[:]
         except FMICallException as exc:
-            self._time = None  # the next call starts the instance again
+            self._time = None  # the next call restores the snapshot at t_fmu, or starts again
+            self._snap_time = t_fmu if snapshot_at_t else None
             raise s.failure(f"{self.name}: {what}", exc, since=n_msg) from None
-        self._time = t_fmu + dt
+        self._time, self._snap_time = t_fmu + dt, t_fmu
         self.steps += 1
         self.points += X.shape[0]
         self.seconds += time.perf_counter() - t0
