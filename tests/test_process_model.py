@@ -414,3 +414,22 @@ def test_a_bad_process_component_is_one_line(fmu_dir, tmp_path, hilly_line, obse
     with pytest.raises(UserError) as err:
         ObserverBank(system, None)
     assert message in str(err.value) and "\n" not in str(err.value)
+
+
+def test_a_failing_sigma_point_names_itself_and_the_next_call_recovers(fmu_dir):
+    """v = 1e200 m/s overflows r2 v^2: the FMU's own message, the sigma point and the step are
+    in one line; the next call at the same time restores the snapshot and is exact again."""
+    from fmus.cosim.process_model import FmuProcessModel
+
+    pm = FmuProcessModel(fmu_dir / "TrainLongitudinal.fmu", TRAIN_COLUMNS, **PROCESS)
+    X = sigma_like_points()[:3]
+    pm(X, 0.1, 0.0, 10.0)
+    bad = X.copy()
+    bad[1, 1] = 1e200
+    with pytest.raises(FMUError) as err:
+        pm(bad, 0.1, 10.0, 10.0)
+    msg = str(err.value)
+    assert "process_model: sigma point 1 [" in msg and "fmi2DoStep (step from t = 10 s, dt = 10 s)" in msg
+    assert "state v became" in msg and "\n" not in msg
+    np.testing.assert_array_equal(pm(X, 0.1, 10.0, 10.0), twin_process()(X, 0.1, 10.0, 10.0))
+    pm.close()

@@ -191,35 +191,39 @@ class FmuProcessModel:
             restore = False
         t_fmu = self._snap_time if restore else self._time
         s, f, c = self.slave, self.slave.fmu, self._c
-        Y = np.empty_like(X)
-        Y[:, self._held_cols] = X[:, self._held_cols]
+        set_state, set_real, get_real, do_step = f.fmi2SetFMUstate, f.fmi2SetReal, f.fmi2GetReal, f.fmi2DoStep
+        vin, vr_in, vout, vr_out, n_in, n_out = self._in, self._vr_in, self._out, self._vr_out, X.shape[1], len(self._out)
         n_msg = len(s.messages)
-        what, snapshot_at_t = "fmi2SetFMUstate", restore
+        what, snapshot_at_t, i = "fmi2SetFMUstate", restore, -1
+        outs = []
         try:
             if restore:
-                f.fmi2SetFMUstate(c, self._snapshot)
+                set_state(c, self._snapshot)
             what = "setting the known inputs"
             if self.known:
                 self._known[:] = u.tolist()
-                f.fmi2SetReal(c, self._vr_known, len(self.known), self._known)
+                set_real(c, self._vr_known, len(self.known), self._known)
             what, snapshot_at_t = "fmi2GetFMUstate", False
             f.fmi2GetFMUstate(c, ctypes.byref(self._snapshot))  # overwrites the previous snapshot
             snapshot_at_t = True
+            what = "a sigma point"
             for i, row in enumerate(X.tolist()):
                 if i:
-                    what = "fmi2SetFMUstate"
-                    f.fmi2SetFMUstate(c, self._snapshot)
-                what = f"sigma point {i}: setting the state inputs"
-                self._in[:] = row
-                f.fmi2SetReal(c, self._vr_in, len(row), self._in)
-                what = f"sigma point {i}: fmi2DoStep at t = {t_fmu:.9g} s"
-                f.fmi2DoStep(c, t_fmu, dt, fmi2False)
-                f.fmi2GetReal(c, self._vr_out, len(self._out_cols), self._out)
-                Y[i, self._out_cols] = self._out[:]
+                    set_state(c, self._snapshot)
+                vin[:] = row
+                set_real(c, vr_in, n_in, vin)
+                do_step(c, t_fmu, dt, fmi2False)
+                get_real(c, vr_out, n_out, vout)
+                outs.append(vout[:])
         except FMICallException as exc:
             self._time = None  # the next call restores the snapshot at t_fmu, or starts again
             self._snap_time = t_fmu if snapshot_at_t else None
+            if i >= 0:
+                what = f"sigma point {i} {X[i].tolist()}: {exc.function} (step from t = {t_fmu:.9g} s, dt = {dt:g} s)"
             raise s.failure(f"{self.name}: {what}", exc, since=n_msg) from None
+        Y = np.empty_like(X)
+        Y[:, self._held_cols] = X[:, self._held_cols]
+        Y[:, self._out_cols] = outs
         self._time, self._snap_time = t_fmu + dt, t_fmu
         self.steps += 1
         self.points += X.shape[0]
