@@ -429,7 +429,7 @@ def test_a_failing_sigma_point_names_itself_and_the_next_call_recovers(fmu_dir):
     with pytest.raises(FMUError) as err:
         pm(bad, 0.1, 10.0, 10.0)
     msg = str(err.value)
-    assert "process_model: sigma point 1 [" in msg and "fmi2DoStep (step from t = 10 s, dt = 10 s)" in msg
+    assert "TrainLongitudinal.fmu (process_model): sigma point 1 [" in msg and "fmi2DoStep (step from t = 10 s, dt = 10 s)" in msg
     assert "state v became" in msg and "\n" not in msg
     np.testing.assert_array_equal(pm(X, 0.1, 10.0, 10.0), twin_process()(X, 0.1, 10.0, 10.0))
     pm.close()
