@@ -57,7 +57,7 @@ class FmuPaperUKF(PaperUKF):
     """:class:`PaperUKF` with ``process`` an :class:`FmuProcessModel` of the component named by
     the setting ``process_component`` (module docstring). Diagnostics beside PaperUKF's: the
     process model's ``process_steps``, ``process_sigma_points``, ``process_seconds`` and
-    ``process_us_per_step`` (µs per filter prediction, all sigma points)."""
+    ``process_us_per_call`` (µs per process call: one filter prediction, all sigma points)."""
 
     process_columns: ClassVar[tuple[tuple[str, str | None], ...]] = TRAIN_COLUMNS
     process_known: ClassVar[tuple[str, ...]] = ("effort_set",)
@@ -99,7 +99,7 @@ class FmuPaperUKF(PaperUKF):
         p = self.process
         return {**super().finish(), "process_steps": p.steps, "process_sigma_points": p.points,
                 "process_seconds": p.seconds,
-                "process_us_per_step": 1e6 * p.seconds / p.steps if p.steps else None}
+                "process_us_per_call": 1e6 * p.seconds / p.steps if p.steps else None}
 
     def close(self) -> None:
         """Free the process model's FMU instance (a later run creates it again)."""
