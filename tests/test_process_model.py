@@ -1,7 +1,9 @@
-"""An FMU as the process model of a sigma-point filter (``fmus/cosim/process_model.py``):
-TrainLongitudinal's process-model inputs (``set_state``, ``use_effort_set``) leave every
-output bit for bit as before when false, equal the Python twin when true and give the closed
-forms of a constant-effort step."""
+"""An FMU as the process model of a sigma-point filter (``fmus/cosim/process_model.py``) and
+``ukf_fmu`` (``experiments/fmu_process.py``): TrainLongitudinal's process-model inputs
+(``set_state``, ``use_effort_set``) leave every output bit for bit as before when false,
+equal the Python twin when true and give the closed forms of a constant-effort step; each
+sigma point is one FMU step, bit for bit the twin's; ukf_fmu equals PaperUKF on the twin bit
+for bit and on its Python ODE to round-off, on GNSS fixes of a driven run of the FMUs."""
 
 from __future__ import annotations
 
@@ -14,7 +16,7 @@ import pytest
 
 from fmus.cosim.masters import run
 from fmus.cosim.slave import FMUError, Slave
-from fmus.cosim.system import Component, Connection, System
+from fmus.cosim.system import Component
 from models.train_longitudinal import GAMMA, LOAD_MASS, R0, R1, R2, TARE_MASS, Train
 
 DATA = Path(__file__).parent / "data"
@@ -23,33 +25,36 @@ TRAIN_OUTPUTS = ("s", "v", "acceleration", "effort", "effort_specific", "power",
                  "gradient", "gradient_specific", "speed_limit")
 
 
-def driven_run(fmu_dir: Path, seed: int = 1):
-    """Driver + TrainLongitudinal + GnssReceiver, 1 s steps, Jacobi: the driven 32 km run."""
-    system = System(
-        "train_run",
-        [Component("train", fmu_dir / "TrainLongitudinal.fmu", {}),
-         Component("driver", fmu_dir / "Driver.fmu", {"seed": seed}),
-         Component("gnss", fmu_dir / "GnssReceiver.fmu", {"seed": seed})],
-        [Connection("driver", "command", "train", "command"),
-         Connection("train", "s", "driver", "s"), Connection("train", "v", "driver", "v"),
-         Connection("train", "speed_limit", "driver", "speed_limit"),
-         Connection("train", "s", "gnss", "s_true"), Connection("train", "v", "gnss", "v_true")],
-        stop_time=3000.0, step_size=1.0,
-        record=["driver.command", *(f"train.{o}" for o in TRAIN_OUTPUTS)])
-    return run(system, "jacobi", progress=False)
+# (command, seconds held in 1 s steps): traction, part traction, coast, brake to a standstill,
+# stand, restart, part brake; r2 x 1.5 from 400 s
+COMMAND_PLAN = [(1.0, 300), (0.4, 200), (0.0, 300), (-0.5, 200), (0.0, 20), (0.8, 120), (-0.3, 60)]
 
 
 def test_with_the_new_inputs_false_every_output_is_bit_identical_to_before(fmu_dir):
-    """tests/data/train_run_seed1.csv was recorded with the TrainLongitudinal FMU before these
-    inputs existed: every 20th row as text (repr: exact), all 1308 rows as a SHA-256."""
-    res = driven_run(fmu_dir)
-    with open(DATA / "train_run_seed1.csv") as f:
+    """tests/data/train_command_plan.csv was recorded with the TrainLongitudinal FMU before
+    these inputs existed (the shipped line, COMMAND_PLAN): every 20th row as text (repr:
+    exact), all 1201 rows as a SHA-256. The FMU now gives the same bits, and so does its twin."""
+    fmu, twin = start(fmu_dir), Train()
+    rows, t = [[0.0, 0.0, *(fmu.get(o) for o in TRAIN_OUTPUTS)]], 0.0
+    for u, n in COMMAND_PLAN:
+        for _ in range(n):
+            r2 = R2 * (1.5 if t >= 400 else 1.0)
+            fmu.set("command", u), fmu.set("r2", r2)
+            twin.u.update(command=u, r2=r2)
+            fmu.do_step(t, 1.0)
+            twin.step(1.0)
+            t += 1.0
+            rows.append([t, u, *(fmu.get(o) for o in TRAIN_OUTPUTS)])
+            out = twin.outputs()
+            assert rows[-1][2:] == [out[o] for o in TRAIN_OUTPUTS], t
+    fmu.close()
+    with open(DATA / "train_command_plan.csv") as f:
         digest = f.readline().split()[-1]
         header = f.readline().strip().split(",")
         ref = np.array([[float(x) for x in line.split(",")] for line in f])
-    assert res.columns == header
-    data = np.ascontiguousarray(res.data, dtype="<f8")
-    assert data.shape == (1308, len(header))
+    assert header == ["time", "command", *TRAIN_OUTPUTS]
+    data = np.ascontiguousarray(rows, dtype="<f8")
+    assert data.shape == (1201, len(header)) and 0.0 in data[:, 3]  # it stood still once
     assert np.array_equal(data[::20], ref)
     assert hashlib.sha256(data.tobytes()).hexdigest() == digest
 
@@ -270,10 +275,11 @@ def test_ukf_fmu_equals_the_python_ode_process_to_round_off(fmu_dir, gnss_fixes)
 
 
 def test_ukf_fmu_against_the_papers_discrete_process(fmu_dir, gnss_fixes):
-    """The whole run (131 fixes) against PaperUKF with eq. 4, both with the paper's effort
-    (eq. 1 inverted with eq. 4's constant acceleration over the 10 s) and Q = 0. Measured:
-    speed rms 0.81 km/h against 0.28, position rms 79 m against 4.7 m, final r0-r2 within
-    0.4 % of each other: under eq. 1 the held effort does not reproduce the measured speed
+    """The whole run against PaperUKF with eq. 4, both with the paper's effort (eq. 1
+    inverted with eq. 4's constant acceleration over the 10 s) and Q = 0. Measured on seed 1:
+    speed rms 0.8-1.0 km/h against 0.28-0.29, position rms 80-110 m against 4-5 m, final
+    r0-r2 within 0.6 % of each other (the ranges: the Driver with and without its 30 s
+    dwell at the platform). Under eq. 1 the held effort does not reproduce the measured speed
     change (r(v) grows as the train accelerates), and the filter, sure of its state (Q = 0),
     does not correct it."""
     from estimators.running_resistance import PaperUKF
@@ -286,15 +292,15 @@ def test_ukf_fmu_against_the_papers_discrete_process(fmu_dir, gnss_fixes):
         return float(np.sqrt(np.mean(x * x)))
 
     assert 3.6 * rms(D[:, 1] - v_true) < 0.35 and rms(D[:, 0] - s_true) < 6.0
-    assert 0.6 < 3.6 * rms(E[:, 1] - v_true) < 1.0 and 50 < rms(E[:, 0] - s_true) < 110
-    np.testing.assert_allclose(E[-1, 2:5], D[-1, 2:5], rtol=5e-3)
+    assert 0.6 < 3.6 * rms(E[:, 1] - v_true) < 1.3 and 50 < rms(E[:, 0] - s_true) < 160
+    np.testing.assert_allclose(E[-1, 2:5], D[-1, 2:5], rtol=1e-2)
     f.close()
 
 
 def test_ukf_fmu_with_the_effort_its_process_needs_tracks_as_eq_4(fmu_dir, gnss_fixes):
     """effort="process": the effort whose FMU prediction of the centre point reproduces the
-    measured speed change. Measured: speed rms 0.28 km/h, position rms 4.9 m (eq. 4: 0.28 and
-    4.7), final r0-r2 within 1e-4 of eq. 4's; three FMU process calls per fix."""
+    measured speed change. Measured on seed 1: speed rms 0.28-0.29 km/h, position rms 3.8-4.9
+    m, as eq. 4, final r0-r2 within 2e-6 of eq. 4's; three FMU process calls per fix."""
     from estimators.running_resistance import PaperUKF
     from experiments.fmu_process import FmuPaperUKF, process_model
 
