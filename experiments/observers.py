@@ -15,7 +15,10 @@ both see the same samples):
   is 0, or, for an event-driven observer, where it has not changed since the last sample;
   the observer updates with the channels present (its ``mask``);
 * **offline observers** (``offline="true"``: smoothers, batch identification) get the whole
-  record once the run has ended and write ``estimates_<name>.csv``.
+  record once the run has ended and write ``estimates_<name>.csv``;
+* **FMU process models**: the setting ``process_component`` names a component whose FMU (one
+  more instance, the component's parameters) becomes the observer's ``process``
+  (:mod:`experiments.fmu_process`); it is freed when the run closes.
 
 ``estimates.csv`` (the online estimates, each held between its observer's samples) is
 written as the run goes, like ``signals.csv``.

@@ -25,6 +25,16 @@ TRAIN_OUTPUTS = ("s", "v", "acceleration", "effort", "effort_specific", "power",
                  "gradient", "gradient_specific", "speed_limit")
 
 
+def start(fmu_dir, **inputs) -> Slave:
+    """The TrainLongitudinal FMU initialised at t = 0 with ``inputs`` (and parameters) set."""
+    fmu = Slave(fmu_dir / "TrainLongitudinal.fmu")
+    fmu.enter_initialization(0.0)
+    for k, v in inputs.items():
+        fmu.set(k, v)
+    fmu.exit_initialization()
+    return fmu
+
+
 # (command, seconds held in 1 s steps): traction, part traction, coast, brake to a standstill,
 # stand, restart, part brake; r2 x 1.5 from 400 s
 COMMAND_PLAN = [(1.0, 300), (0.4, 200), (0.0, 300), (-0.5, 200), (0.0, 20), (0.8, 120), (-0.3, 60)]
@@ -57,15 +67,6 @@ def test_with_the_new_inputs_false_every_output_is_bit_identical_to_before(fmu_d
     assert data.shape == (1201, len(header)) and 0.0 in data[:, 3]  # it stood still once
     assert np.array_equal(data[::20], ref)
     assert hashlib.sha256(data.tobytes()).hexdigest() == digest
-
-
-def start(fmu_dir, **inputs) -> Slave:
-    fmu = Slave(fmu_dir / "TrainLongitudinal.fmu")
-    fmu.enter_initialization(0.0)
-    for k, v in inputs.items():
-        fmu.set(k, v)
-    fmu.exit_initialization()
-    return fmu
 
 
 def test_set_state_and_effort_set_equal_the_twin_bit_for_bit(fmu_dir):
