@@ -107,7 +107,7 @@ def ode_process(line: LineTerm, integrator_step: float = 0.05) -> Process:
     def rates(s, v, R, u):
         g = line(s)
         moving = v > 0
-        a = np.where(moving, u - R[:, 0] - R[:, 1] * v - R[:, 2] * v * v - g,
+        a = np.where(moving, u - (R[:, 0] + R[:, 1] * v + R[:, 2] * v * v) - g,
                      np.maximum(u - R[:, 0] - g, 0.0))
         return np.where(moving, v, 0.0), a
 
