@@ -602,6 +602,11 @@ class ImprovedEstimator(Observer):
                     c = (M[3, 4] - M[:3, 4] @ self.theta) / M[4, 4]
                     self.v_coast = float(c + (self.Phi[f0] - self.Phi[n]) @ self.theta - (self.Gc[n] - self.Gc[f0]))
 
+    @property
+    def covariance_r(self) -> np.ndarray:
+        """The posterior covariance of (r0, r1, r2) (SI), as the last estimate."""
+        return self.theta_cov
+
     def finish(self) -> dict:
         out = {**super().finish(), "coasting_segments": len(self.segments)}
         if self.segments:
