@@ -357,8 +357,10 @@ class ImprovedEstimator(Observer):
            v_j + sum_(i<=j) dt_i g_i = c - Phi_j^T theta + e_j,  Phi_j = sum_(i<=j) dt_i phi_i  (C2)
 
        linear in the segment's initial speed ``c`` and ``theta``. Eliminating ``c``
-       (centring over the segment, :func:`coasting_information`) gives its information
-       ``A_seg = X~^T X~ / sigma_v^2``, ``b_seg = X~^T y~ / sigma_v^2``. The estimate is the
+       (centring over the segment: :func:`coasting_information` in batch; the estimator
+       keeps the running sums of (C2)'s products from the segment's first fix, so a fix
+       costs O(1)) gives its information ``A_seg = X~^T X~ / sigma_v^2``,
+       ``b_seg = X~^T y~ / sigma_v^2``. The estimate is the
        posterior mean with the Gaussian prior ``N(theta0, diag(rho theta0)^2)``::
 
            theta^ = (Lambda0 + sum A_seg)^-1 (Lambda0 theta0 + sum b_seg),
@@ -426,7 +428,7 @@ class ImprovedEstimator(Observer):
         self.theta0 = np.array([_setting(settings, "r0_init", R0), _setting(settings, "r1_init", R1),
                                 _setting(settings, "r2_init", R2)])
         if not (self.theta0 > 0).all():
-            raise ValueError("the prior r0_init, r1_init, r2_init must be > 0 (the prior's sigma is a fraction of them)")
+            raise ValueError("r0_init, r1_init, r2_init must be > 0 (the prior's sigma is a fraction of each)")
         self.m = max(int(round(p["recognition_window"] / self.dt)), 1)
         self.Lambda0 = np.diag((p["prior_rel_sigma"] * self.theta0) ** -2.0)
         self.R = np.diag([p["sigma_position"] ** 2, p["sigma_speed"] ** 2])
@@ -603,9 +605,13 @@ class ImprovedEstimator(Observer):
                     self.v_coast = float(c + (self.Phi[f0] - self.Phi[n]) @ self.theta - (self.Gc[n] - self.Gc[f0]))
 
     @property
-    def covariance_r(self) -> np.ndarray:
-        """The posterior covariance of (r0, r1, r2) (SI), as the last estimate."""
-        return self.theta_cov
+    def covariance(self) -> np.ndarray:
+        """The covariance of ``(s, v, r0, r1, r2)`` (SI) as the last estimate: the kinematic
+        filter's for ``s, v`` and the posterior (C3)'s for the coefficients (independent)."""
+        C = np.zeros((5, 5))
+        C[:2, :2] = self.P[:2, :2]
+        C[2:, 2:] = self.theta_cov
+        return C
 
     def finish(self) -> dict:
         out = {**super().finish(), "coasting_segments": len(self.segments)}

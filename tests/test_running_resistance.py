@@ -242,7 +242,7 @@ def test_incremental_sums_equal_the_batch(scattered_runs):
         Ai, bi = coasting_information(t, v, g, (1 / 3.6) / np.sqrt(12))
         A, b = A + Ai, b + bi
     np.testing.assert_allclose(est[-1, 2:5], np.linalg.solve(A, b), rtol=1e-6)
-    np.testing.assert_allclose(f.covariance_r, np.linalg.inv(A), rtol=1e-6)
+    np.testing.assert_allclose(f.covariance[2:, 2:], np.linalg.inv(A), rtol=1e-6)
 
 
 def test_improved_beats_the_paper_on_runs_with_known_truth(scattered_runs):
