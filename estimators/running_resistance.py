@@ -326,8 +326,9 @@ class ImprovedEstimator(Observer):
     needs no resistance at all.
 
     1. Recognition. With ``theta0`` the prior mean (the published coefficients), the
-       effort of eq. 1 needed by a window of ``m = max(1, round(recognition_window / dt))``
-       intervals ``[t_a, t_b]`` of fixes is::
+       effort of eq. 1 needed over a window of fixes ``a..b`` (``b`` each new fix, ``a`` the
+       last fix at least ``recognition_window`` before it: one interval at 10 s fixes, ten
+       at 1 s) is::
 
            u_w = (v_b - v_a) / T_w + sum_i (dt_i / T_w) (phi_i^T theta0 + g_i)      (C0)
            phi_i = (1, vb_i, vb_i^2),  vb_i = (v_(i-1) + v_i) / 2,  T_w = t_b - t_a
@@ -335,8 +336,8 @@ class ImprovedEstimator(Observer):
        with ``g_i`` the mean line term over the interval's distance (exact for the
        piecewise-constant profile). An interval is a coasting candidate if some window
        holding it has ``|u_w| <= effort_band`` and its speed is above ``min_speed``. A
-       segment is a maximal run of candidates, trimmed by ``m`` intervals at each end (a
-       regime change inside an interval), kept if it lasts ``min_coast`` and passes a test
+       segment is a maximal run of candidates, trimmed by a recognition window at each end
+       (a regime change may lie inside the window that let it in), kept if it lasts ``min_coast`` and passes a test
        against the prior predictive distribution of its mean effort (a speed hold at
        40 km/h passes the band but not this: its speed does not fall as any plausible
        resistance would make it)::
@@ -354,7 +355,8 @@ class ImprovedEstimator(Observer):
        Summed from the segment's first fix, with each reading's own error ``e_j``
        (rounding: ``sigma_v = sigma_speed``, independent between fixes)::
 
-           v_j + sum_(i<=j) dt_i g_i = c - Phi_j^T theta + e_j,  Phi_j = sum_(i<=j) dt_i phi_i  (C2)
+           v_j + sum_(i<=j) dt_i g_i = c - Phi_j^T theta + e_j,                     (C2)
+       Phi_j = sum_(i<=j) dt_i phi_i
 
        linear in the segment's initial speed ``c`` and ``theta``. Eliminating ``c``
        (centring over the segment: :func:`coasting_information` in batch; the estimator
@@ -368,9 +370,10 @@ class ImprovedEstimator(Observer):
 
        With ``r_random_walk = q > 0`` the coefficients may drift: before each segment the
        covariance grows by ``diag(q theta0)^2 (t - t_last)`` (a Kalman filter on theta with
-       the segments as measurements). Online, a segment counts from its end (the trim
-       needs ``m`` more fixes); before that, the open segment counts provisionally, so the
-       estimate at the last fix is the batch estimate of the whole record.
+       the segments as measurements). Online, a segment is closed a window or two after
+       its end (when no later window can hold its intervals); until then it counts
+       provisionally, so the estimate at the last fix is the batch estimate of the whole
+       record. The fixes may be irregular (a missing fix lengthens an interval).
     3. Position and speed: a Kalman filter on ``(s, v, a)`` with white jerk of spectral
        density ``jerk_noise`` (``Q`` the integrated white-jerk model) and measurement noise
        ``sigma_position``, ``sigma_speed``; it needs no resistance and no effort. While the
@@ -429,7 +432,7 @@ class ImprovedEstimator(Observer):
                                 _setting(settings, "r2_init", R2)])
         if not (self.theta0 > 0).all():
             raise ValueError("r0_init, r1_init, r2_init must be > 0 (the prior's sigma is a fraction of each)")
-        self.m = max(int(round(p["recognition_window"] / self.dt)), 1)
+        self._W = p["recognition_window"] * (1.0 - 1e-9)  # fix times on a grid, up to round-off
         self.Lambda0 = np.diag((p["prior_rel_sigma"] * self.theta0) ** -2.0)
         self.R = np.diag([p["sigma_position"] ** 2, p["sigma_speed"] ** 2])
         self.H = np.eye(2, 3)
@@ -457,10 +460,13 @@ class ImprovedEstimator(Observer):
         self.cand: list[bool] = []  # per interval: coasting candidate
         self.Phi = [np.zeros(3)]  # per fix j: sum over the intervals before it of dt (1, vb, vb^2)
         self.Gc = [0.0]  # per fix j: sum over the intervals before it of dt g
-        self._hist: list[np.ndarray] = []  # the open segment's sums, from its trimmed first fix
+        self._a = 0  # first fix of the recognition window that ends at the last fix
         self._done = 0  # intervals whose candidate flag is final
         self._open: int | None = None  # first interval of the open run of candidates
-        self.segments: list[tuple[int, int]] = []  # accepted (first, end) intervals, end exclusive
+        self._origin: int | None = None  # its trimmed first fix, once it has arrived
+        self._hist: list[np.ndarray] = []  # the open segment's sums, from its trimmed first fix
+        self.closed: list[tuple[int, int]] = []  # accepted segments: first and last fix
+        self._provisional: tuple[int, int] | None = None  # the open one, if it counts
         self.info_P = np.linalg.inv(self.Lambda0)  # covariance of theta after the closed segments
         self.info_theta = self.theta0.copy()
         self._t_info = self._t0
@@ -513,19 +519,25 @@ class ImprovedEstimator(Observer):
         self.fix_t.append(t)
         self.fix_s.append(s)
         self.fix_v.append(v)
-        n, m = len(self.cand), self.m  # intervals 0..n-1; interval i joins fixes i and i + 1
-        if n >= m and abs(self._effort(n - m, n)) <= self.p["effort_band"]:
-            for i in range(n - m, n):
+        n = len(self.cand)  # intervals 0..n-1; interval i joins fixes i and i + 1
+        if n == 0:
+            return
+        # the window ending at fix n starts at the last fix a recognition window before it
+        while self._a + 1 < n and t - self.fix_t[self._a + 1] >= self._W:
+            self._a += 1
+        a = self._a
+        if t - self.fix_t[a] >= self._W and abs(self._effort(a, n)) <= self.p["effort_band"]:
+            for i in range(a, n):
                 self.cand[i] = self.vb[i] > self.p["min_speed"]
-        while self._done <= n - m:  # interval i is final once every window holding it was seen
+        while self._done < a:  # no later window holds an interval before a: its flag is final
             i = self._done
             if self.cand[i] and self._open is None:
-                self._open, self._hist = i, []
+                self._open, self._origin, self._hist = i, None, []
             elif not self.cand[i] and self._open is not None:
                 self._close(self._open, i)
                 self._open = None
             self._done += 1
-        if self._open is not None and n >= self._open + m:
+        if self._open is not None:
             self._accumulate(n)
         self._refresh()
 
@@ -535,27 +547,39 @@ class ImprovedEstimator(Observer):
         return ((self.fix_v[b] - self.fix_v[a]) + (self.Phi[b] - self.Phi[a]) @ self.theta0
                 + self.Gc[b] - self.Gc[a]) / T
 
-    def _accumulate(self, j: int) -> None:
-        """The open segment's sums up to fix j: M = sum_k z_k z_k^T, z = (x_k, y_k, 1) of
-        (C2) with the trimmed segment's first fix as origin (centring then costs O(1))."""
-        f0 = self._open + self.m
-        z = np.empty(5)
-        z[:3] = self.Phi[f0] - self.Phi[j]
-        z[3] = self.fix_v[j] + self.Gc[j] - self.Gc[f0]
-        z[4] = 1.0
-        M = np.outer(z, z)
-        self._hist.append(M if not self._hist else self._hist[-1] + M)
+    def _trimmed(self, first: int, end: int) -> tuple[int, int]:
+        """The fixes (f0, f1) of the run of intervals [first, end) trimmed by a recognition
+        window at each end (a regime change may lie inside the windows that let it in)."""
+        return (bisect.bisect_left(self.fix_t, self.fix_t[first] + self._W),
+                bisect.bisect_right(self.fix_t, self.fix_t[end] - self._W) - 1)
+
+    def _accumulate(self, n: int) -> None:
+        """The open segment's sums up to fix n: M_j = sum_(k<=j) z_k z_k^T, z = (x_k, y_k, 1)
+        of (C2) with the trimmed segment's first fix as origin (centring then costs O(1))."""
+        if self._origin is None:
+            f0 = self._trimmed(self._open, self._open)[0]
+            if f0 > n:
+                return
+            self._origin = f0
+        f0 = self._origin
+        for j in range(f0 + len(self._hist), n + 1):
+            z = np.empty(5)
+            z[:3] = self.Phi[f0] - self.Phi[j]
+            z[3] = self.fix_v[j] + self.Gc[j] - self.Gc[f0]
+            z[4] = 1.0
+            M = np.outer(z, z)
+            self._hist.append(M if not self._hist else self._hist[-1] + M)
 
     def _segment(self, first: int, end: int) -> tuple[np.ndarray, np.ndarray] | None:
-        """The information (A, b) of the run of candidate intervals [first, end) of the open
-        segment, trimmed by m intervals at each end, if it lasts min_coast and passes the
-        prior predictive test (docstring, 1.); else None."""
-        f0, f1 = first + self.m, end - self.m
-        if f1 <= f0:
+        """The information (A, b) of the open run of candidate intervals [first, end),
+        trimmed, if it lasts min_coast and passes the prior predictive test (docstring, 1.);
+        else None."""
+        f0, f1 = self._trimmed(first, end)
+        if f1 <= f0 or self._origin != f0:
             return None
         T = self.fix_t[f1] - self.fix_t[f0]
         p = self.p
-        if T < p["min_coast"] or T <= 0:
+        if T < p["min_coast"]:
             return None
         phibar = (self.Phi[f1] - self.Phi[f0]) / T
         var = 2.0 * p["sigma_speed"] ** 2 / T**2 + np.sum((p["prior_rel_sigma"] * self.theta0 * phibar) ** 2)
@@ -580,29 +604,37 @@ class ImprovedEstimator(Observer):
     def _close(self, first: int, end: int) -> None:
         info = self._segment(first, end)
         if info is not None:
-            t_end = self.fix_t[end - self.m]
+            f0, f1 = self._trimmed(first, end)
+            t_end = self.fix_t[f1]
             self.info_P, self.info_theta = self._posterior(self.info_P, self.info_theta, self._t_info, t_end, info)
             self._t_info = t_end
-            self.segments.append((first + self.m, end - self.m))
+            self.closed.append((f0, f1))
 
     def _refresh(self) -> None:
         """theta^: the closed segments and, provisionally, the open run of candidates; while
         the train coasts in an accepted segment, its speed from the segment's fit (C2)."""
         self.theta, self.theta_cov = self.info_theta, self.info_P
         self.v_coast = None
+        self._provisional = None
         if self._open is not None:
             n = end = len(self.cand)
             while end > self._open and not self.cand[end - 1]:
                 end -= 1
             info = self._segment(self._open, end)
             if info is not None:
+                f0, f1 = self._provisional = self._trimmed(self._open, end)
                 self.theta_cov, self.theta = self._posterior(self.info_P, self.info_theta, self._t_info,
-                                                             self.fix_t[end - self.m], info)
+                                                             self.fix_t[f1], info)
                 if end == n:  # still coasting: c of (C2) given theta^, then the fit at the last fix
-                    f0 = self._open + self.m
-                    M = self._hist[end - self.m - f0]
+                    M = self._hist[f1 - f0]
                     c = (M[3, 4] - M[:3, 4] @ self.theta) / M[4, 4]
                     self.v_coast = float(c + (self.Phi[f0] - self.Phi[n]) @ self.theta - (self.Gc[n] - self.Gc[f0]))
+
+    @property
+    def segments(self) -> list[tuple[int, int]]:
+        """The coasting segments the last estimate used (first and last fix index): the
+        closed ones and the open one if it counts."""
+        return self.closed + ([self._provisional] if self._provisional else [])
 
     @property
     def covariance(self) -> np.ndarray:

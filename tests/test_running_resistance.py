@@ -286,6 +286,26 @@ def test_heavy_load_and_one_hertz(fmu_dir):
         assert resistance_rel_error(e[-1, 2:5], d["truth"]) < 0.02
 
 
+def test_improved_is_in_seconds_not_samples(scattered_runs):
+    """Sampled every 1 s with a fix every 10 s (the other samples masked out, as the bank does
+    for an event-driven observer): the recognition windows and trims are in seconds and the
+    white-jerk model is discretised exactly, so every estimate at the fixes equals the 10 s
+    observer's to round-off; a fix whose speed is missing only lengthens an interval."""
+    d = scattered_runs[1]
+    ref = ImprovedEstimator(10.0).run(d["t"], d["z"])
+    t = np.arange(d["t"][0], d["t"][-1] + 0.5, 1.0)
+    z = np.full((t.size, 2), np.nan)
+    k = np.searchsorted(t, d["t"])
+    z[k] = d["z"]
+    est = ImprovedEstimator(1.0).run(t, z)
+    np.testing.assert_allclose(est[k], ref, rtol=1e-9, atol=1e-9)
+    z[k[60], 1] = np.nan  # one speed reading lost in the final coast
+    f = ImprovedEstimator(1.0)
+    lost = f.run(t, z)
+    assert f.finish()["partial"] == 1
+    assert resistance_rel_error(lost[-1, 2:5], d["truth"]) < 0.015
+
+
 def test_improved_bad_settings_are_one_line_errors():
     for settings, match in (({"effort_band": -0.1}, "effort_band must be > 0"),
                             ({"min_coast": -1.0}, "min_coast must be >= 0"),
