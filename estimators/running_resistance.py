@@ -1,5 +1,7 @@
 r"""Running resistance of a train from GNSS position and speed: the Unscented Kalman filter of
-Cunillera et al. (2022) §3.1 (``PaperUKF``), with its process model as a replaceable part.
+Cunillera et al. (2022) §3.1 (``PaperUKF``), with its process model as a replaceable part,
+and ``ImprovedEstimator``, which fits the Davis coefficients to the coasting segments of a run
+(its own docstring).
 
 Design model (mass-specific, SI; state ``x = (s, v, r0, r1, r2)``, the Davis coefficients
 constant: ``Q = 0`` as the paper)::
@@ -394,6 +396,14 @@ class ImprovedEstimator(Observer):
     1e-2 m^2/s^5 (1e-3 to 1e-1 give the same speed error; 1e-5 and below lag the regime
     changes by up to 1 km/h).
 
+    Measured (seeds 1-67 of the same simulation, 10 s fixes unless said; median / p95 of
+    ``resistance_rel_error`` and of ``speed_rmse_kmh``; the paper's UKF beside it):
+    ``standard`` 0.42 % / 1.7 % and 0.23 / 0.30 km/h (UKF 5.2 % / 10.2 %, 0.28 / 0.32
+    km/h); 1 s fixes 0.11 % / 0.42 % and 0.19 / 0.26 km/h (UKF 5.1 % / 10.1 %); 100 % load
+    0.45 % / 1.7 % (UKF 9.3 % / 19.7 %); r2 rising by 30 % over 1500 s, against the truth
+    at the end of the run, 4.1 % / 6.4 % (UKF 11.7 % / 21.5 %): the coasting data lie
+    5-10 min before the end. 0.04 s per run with 10 s fixes (131 fixes), under load.
+
     Settings (SI): ``r0_init``, ``r1_init``, ``r2_init`` (prior mean, N/kg, N/(kg m/s),
     N/(kg (m/s)^2); default the published values), ``prior_rel_sigma`` (-), ``sigma_speed``
     (m/s; default 1 km/h / sqrt(12), the rounding error of a 1 km/h reading),
@@ -646,12 +656,15 @@ class ImprovedEstimator(Observer):
         return C
 
     def finish(self) -> dict:
-        out = {**super().finish(), "coasting_segments": len(self.segments)}
+        """Diagnostics: the coasting segments used (count, seconds, speed range in km/h) and
+        the posterior standard deviations of r0, r1, r2 (SI)."""
+        out = {**super().finish(), "coasting_segments": len(self.segments), "coasting_s": 0.0}
         if self.segments:
-            t = np.array(self.fix_t)
-            v = np.array(self.fix_v)
+            t, v = np.array(self.fix_t), np.array(self.fix_v)
             out["coasting_s"] = float(sum(t[b] - t[a] for a, b in self.segments))
-            idx = np.concatenate([np.arange(a, b + 1) for a, b in self.segments])
-            out["coasting_speed_range_kmh"] = [float(3.6 * v[idx].min()), float(3.6 * v[idx].max())]
-        out["r_sigma"] = [float(x) for x in np.sqrt(np.diag(self.theta_cov))]
+            fixes = np.concatenate([np.arange(a, b + 1) for a, b in self.segments])
+            out["coasting_min_speed_kmh"] = float(3.6 * v[fixes].min())
+            out["coasting_max_speed_kmh"] = float(3.6 * v[fixes].max())
+        for name, sigma in zip(("r0_sigma", "r1_sigma", "r2_sigma"), np.sqrt(np.diag(self.theta_cov))):
+            out[name] = float(sigma)
         return out
