@@ -148,7 +148,11 @@ def ode_process(line: LineTerm, integrator_step: float = 0.05) -> Process:
 
 
 def _setting(settings: dict, name: str, default: float) -> float:
-    value = float(settings.get(name, default))
+    raw = settings.get(name, default)
+    try:
+        value = float(raw)
+    except (TypeError, ValueError):
+        raise ValueError(f"setting {name} = {raw!r} is not a number") from None
     if not np.isfinite(value):
         raise ValueError(f"setting {name} = {value!r} is not a finite number")
     return value

@@ -129,6 +129,8 @@ def test_bad_settings_are_one_line_errors():
         PaperUKF(10.0, **{SIGMA_NAMES[2]: 0.0})
     with pytest.raises(ValueError, match="not a finite number"):
         PaperUKF(10.0, r0_init=float("nan"))
+    with pytest.raises(ValueError, match="setting alpha = 'abc' is not a number"):
+        PaperUKF(10.0, alpha="abc")  # an SSD rf:Setting that is text
 
 
 # ---- the improved estimator -------------------------------------------------------------------
@@ -339,6 +341,7 @@ def test_improved_bad_settings_are_one_line_errors():
                             ({"min_coast": -1.0}, "min_coast must be >= 0"),
                             ({"sigma_speed": float("inf")}, "not a finite number"),
                             ({"r1_init": 0.0}, "must be > 0"),
+                            ({"effort_band": "wide"}, "setting effort_band = 'wide' is not a number"),
                             ({"efort_band": 0.1}, "unknown setting")):
         with pytest.raises(ValueError, match=match) as err:
             ImprovedEstimator(10.0, **settings)
