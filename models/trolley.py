@@ -320,6 +320,21 @@ class TrolleyTwin:
                         path += 0.5 * hp * w * pr
         return dth, dv, path
 
+    def outputs_over(self, ta: float, tb: float, h: float = 0.0) -> dict:
+        """The outputs at ``tb`` with the increments over ``[ta, tb]`` (``path_length`` is the
+        path travelled over it), without touching the memory."""
+        out, end, C = self.end_state(tb)
+        if tb > ta:
+            dth, dv, path = self.increments(ta, tb, end, C)
+        else:
+            dth, dv, path = [0.0] * 3, [0.0] * 3, 0.0
+        out.update({"dtheta_x": dth[0], "dtheta_y": dth[1], "dtheta_z": dth[2],
+                    "dv_x": dv[0], "dv_y": dv[1], "dv_z": dv[2],
+                    "stopped": self.profile.stopped(tb, STEP_TOLERANCE * h), "path_length": path,
+                    "odometer": (1.0 + 1e-6 * self.p["odometer_scale_ppm"]) * path,
+                    "interval_start": ta, "path_start": 0.0})
+        return out
+
     def outputs(self, t: float, h: float = 0.0) -> dict:
         """The FMU's outputs at communication point ``t`` reached by a step ``h`` (0:
         initialisation). Calls must follow the importer's points in order (repeating one
@@ -327,18 +342,11 @@ class TrolleyTwin:
         if t != self.interval_end:
             self.interval_start, self.interval_end = self.interval_end, t
             self.path_start = self.path_length
-        out, end, C = self.end_state(t)
-        if self.interval_end > self.interval_start:
-            dth, dv, path = self.increments(self.interval_start, self.interval_end, end, C)
-        else:
-            dth, dv, path = [0.0] * 3, [0.0] * 3, 0.0
-        self.path_length = self.path_start + path
-        out.update({"dtheta_x": dth[0], "dtheta_y": dth[1], "dtheta_z": dth[2],
-                    "dv_x": dv[0], "dv_y": dv[1], "dv_z": dv[2],
-                    "stopped": self.profile.stopped(t, STEP_TOLERANCE * h),
-                    "path_length": self.path_length,
+        out = self.outputs_over(self.interval_start, t, h)
+        self.path_length = self.path_start + out["path_length"]
+        out.update({"path_length": self.path_length,
                     "odometer": (1.0 + 1e-6 * self.p["odometer_scale_ppm"]) * self.path_length,
-                    "interval_start": self.interval_start, "path_start": self.path_start})
+                    "path_start": self.path_start})
         return out
 
     def start(self, t0: float = 0.0) -> dict:
