@@ -23,7 +23,8 @@ image; a run shorter than ``2 v^2 / acceleration`` peaks at ``sqrt(D acceleratio
 Body and kinematics
 -------------------
 The body point is the rail centre line point plus the wobble, ``r(s) = p_rail(s) + w_y Y +
-w_z Z``; the body axes are x along the true rail tangent ``q = dp_rail/ds`` (heading
+w_z D`` (lateral along the horizontal normal Y, vertical along the n0 vertical D, as the
+irregularities); the body axes are x along the true rail tangent ``q = dp_rail/ds`` (heading
 ``psi = atan2(q_E, q_N)``, pitch ``theta = atan2(-q_D, |q_NE|)`` in n0) and rolled by the
 cant, ``phi = asin(c / 1.5 m)``: ``C_b^n0 = R3(psi) R2(theta) R1(phi)``. The wobble moves the
 body off the rail without turning it, so the body velocity has lateral and vertical

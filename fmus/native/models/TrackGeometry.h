@@ -343,7 +343,7 @@ static void tg_offsets(const TrackGeom *G, double s, double o[6]) {
 /* body point derivatives, rail tangent and attitude at s; the position too if position != 0 */
 static void tg_point(const TrackGeom *G, double s, int position, TrackPoint *P) {
     TgAngles a;
-    double den, ct, st, th1, th2, sc, cc, H[3], Y[3], T[3], Z[3], T1[3], Y1[3], Z1[3], Y2[3], Z2[3];
+    double den, ct, st, th1, sc, cc, H[3], Y[3], T[3], Z[3], T1[3], Y1[3], Y2[3];
     double o[6], w[6] = {0, 0, 0, 0, 0, 0}, q1[3], hh, h, dh, sphi;
     int i;
     tg_angles(G, s, &a);
@@ -351,40 +351,39 @@ static void tg_point(const TrackGeom *G, double s, int position, TrackPoint *P) 
     ct = 1.0 / sqrt(den);
     st = a.g * ct;
     th1 = a.dg / den;
-    th2 = -2.0 * a.g * a.dg * a.dg / (den * den);
     sc = sin(a.chi), cc = cos(a.chi);
     H[0] = cc, H[1] = sc, H[2] = 0.0;
     Y[0] = -sc, Y[1] = cc, Y[2] = 0.0;
     T[0] = ct * cc, T[1] = ct * sc, T[2] = -st;
-    Z[0] = st * cc, Z[1] = st * sc, Z[2] = ct;
+    Z[0] = st * cc, Z[1] = st * sc, Z[2] = ct; /* the normal of T in the vertical plane */
     for (i = 0; i < 3; i++) {
         T1[i] = -th1 * Z[i] + ct * a.k * Y[i];
         Y1[i] = -a.k * H[i];
-        Z1[i] = th1 * T[i] + st * a.k * Y[i];
         Y2[i] = -a.dk * H[i] - a.k * a.k * Y[i];
     }
-    for (i = 0; i < 3; i++)
-        Z2[i] = th2 * T[i] + th1 * T1[i] + (ct * th1 * a.k + st * a.dk) * Y[i] + st * a.k * Y1[i];
+    /* offsets: y along Y (turns with the heading), z along the fixed vertical D of n0 */
     tg_offsets(G, s, o);
     for (i = 0; i < 3; i++) {
-        P->q[i] = T[i] + o[1] * Y[i] + o[0] * Y1[i] + o[4] * Z[i] + o[3] * Z1[i];
-        q1[i] = T1[i] + o[2] * Y[i] + 2.0 * o[1] * Y1[i] + o[0] * Y2[i] + o[5] * Z[i] +
-                2.0 * o[4] * Z1[i] + o[3] * Z2[i];
+        P->q[i] = T[i] + o[1] * Y[i] + o[0] * Y1[i];
+        q1[i] = T1[i] + o[2] * Y[i] + 2.0 * o[1] * Y1[i] + o[0] * Y2[i];
     }
+    P->q[2] += o[4];
+    q1[2] += o[5];
     if (G->wob_y != 0.0 || G->wob_z != 0.0) {
         const double k = G->wob_w, sn = sin(k * s), cs = cos(k * s);
         w[0] = G->wob_y * sn, w[1] = G->wob_y * k * cs, w[2] = -G->wob_y * k * k * sn;
         w[3] = G->wob_z * sn, w[4] = G->wob_z * k * cs, w[5] = -G->wob_z * k * k * sn;
     }
     for (i = 0; i < 3; i++) {
-        P->r1[i] = P->q[i] + w[1] * Y[i] + w[0] * Y1[i] + w[4] * Z[i] + w[3] * Z1[i];
-        P->r2[i] = q1[i] + w[2] * Y[i] + 2.0 * w[1] * Y1[i] + w[0] * Y2[i] + w[5] * Z[i] +
-                   2.0 * w[4] * Z1[i] + w[3] * Z2[i];
+        P->r1[i] = P->q[i] + w[1] * Y[i] + w[0] * Y1[i];
+        P->r2[i] = q1[i] + w[2] * Y[i] + 2.0 * w[1] * Y1[i] + w[0] * Y2[i];
     }
+    P->r1[2] += w[4];
+    P->r2[2] += w[5];
     if (position) {
         tg_design_position(G, s, P->r);
         TG_ADD(P->r, o[0] + w[0], Y);
-        TG_ADD(P->r, o[3] + w[3], Z);
+        P->r[2] += o[3] + w[3];
     }
     hh = P->q[0] * P->q[0] + P->q[1] * P->q[1];
     h = sqrt(hh);
