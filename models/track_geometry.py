@@ -357,6 +357,13 @@ class Point:
     dpsi: float
     dtheta: float
     dphi: float
+    # the same attitude as cosines and sines, as the C uses them (no trig)
+    cpsi: float = 1.0
+    spsi: float = 0.0
+    cth: float = 1.0
+    sth: float = 0.0
+    cphi: float = 1.0
+    sphi: float = 0.0
 
 
 class TrackGeometry:
@@ -503,8 +510,11 @@ class TrackGeometry:
         dtheta = (-h * q1[2] + q[2] * dh) / (hh + q[2] * q[2])
         sphi = c / RAIL_BASE
         phi = math.asin(sphi)
-        dphi = dc / (RAIL_BASE * math.sqrt(1.0 - sphi * sphi))
-        return Point(s, r, r1, r2, q, psi, theta, phi, dpsi, dtheta, dphi)
+        cphi = math.sqrt(1.0 - sphi * sphi)
+        dphi = dc / (RAIL_BASE * cphi)
+        nq = math.sqrt(hh + q[2] * q[2])
+        return Point(s, r, r1, r2, q, psi, theta, phi, dpsi, dtheta, dphi,
+                     q[0] / h, q[1] / h, h / nq, -q[2] / nq, cphi, sphi)
 
     # -- vectorised helpers for studies --
     def design_positions(self, s) -> np.ndarray:

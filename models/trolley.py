@@ -48,8 +48,8 @@ expansion in the node's displacement ``d`` (millimetres; second-order terms are
 Increments
 ----------
 ``dtheta = int omega_ib^b dt`` and ``dv = int f^b dt`` over the interval from the previous
-communication point to this one, by 4-point Gauss-Legendre quadrature on panels of at most
-20 ms, split at every instant where the integrand is not smooth (the speed profile's phase
+communication point to this one, by 3-point Gauss-Legendre quadrature on panels of at most
+20 ms (error ``~5e-7 h^7 max|f^(6)|``: 1e-18 for 2 m irregularity wavelengths at 1 m/s), split at every instant where the integrand is not smooth (the speed profile's phase
 ends, and the times the trolley passes element ends of the alignment, where the curvature
 rate, the cant rate or the vertical curvature jump). The interval is the one the importer
 actually stepped: the FMU remembers the previous communication point (``interval_start``)
@@ -87,10 +87,11 @@ from .track_geometry import (DEFAULT_IRREGULARITY, DEFAULT_PLACEMENT, DEFAULT_TR
 
 PAPER = "Jiang et al. (2017)"
 REST, ACCELERATE, CRUISE, BRAKE = 0, 1, 2, 3
-#: longest quadrature panel (s) and the 4-point Gauss-Legendre rule on [-1, 1]
+#: longest quadrature panel (s) and the 3-point Gauss-Legendre rule on [-1, 1] (nodes in the
+#: order the C visits them)
 MAX_PANEL = 0.02
-GL4_X = (0.33998104358485626, 0.8611363115940526)
-GL4_W = (0.6521451548625464, 0.34785484513745357)
+GL3 = ((-0.7745966692414834, 0.5555555555555556), (0.0, 0.8888888888888888),
+       (0.7745966692414834, 0.5555555555555556))
 
 
 def _ramp(tau: float, v: float, T: float):
@@ -197,11 +198,9 @@ class SpeedProfile:
         return None
 
 
-def _rot_zyx(psi, theta, phi):
-    """C_b^n0 = R3(psi) R2(theta) R1(phi), row-major."""
-    cp, sp_ = math.cos(psi), math.sin(psi)
-    ct, st = math.cos(theta), math.sin(theta)
-    cf, sf = math.cos(phi), math.sin(phi)
+def _rot_zyx(g):
+    """C_b^n0 = R3(psi) R2(theta) R1(phi), row-major, from the point's cosines and sines."""
+    cp, sp_, ct, st, cf, sf = g.cpsi, g.spsi, g.cth, g.sth, g.cphi, g.sphi
     return [[cp * ct, cp * st * sf - sp_ * cf, cp * st * cf + sp_ * sf],
             [sp_ * ct, sp_ * st * sf + cp * cf, sp_ * st * cf - cp * sf],
             [-st, ct * sf, ct * cf]]
@@ -257,10 +256,9 @@ class TrolleyTwin:
         g_n0 = _mt(C_n_n0, g_ned)
         cor = _cross(om, v)
         f_n0 = [a[i] + 2.0 * cor[i] - g_n0[i] for i in range(3)]
-        C = _rot_zyx(g.psi, g.theta, g.phi)
+        C = _rot_zyx(g)
         f_b = _mt(C, f_n0)
-        sf, cf = math.sin(g.phi), math.cos(g.phi)
-        st, ct = math.sin(g.theta), math.cos(g.theta)
+        sf, cf, st, ct = g.sphi, g.cphi, g.sth, g.cth
         dphi, dth, dpsi = g.dphi * sd, g.dtheta * sd, g.dpsi * sd
         w_e = _mt(C, om)
         w_b = [dphi - dpsi * st + w_e[0], dth * cf + dpsi * ct * sf + w_e[1],
@@ -280,7 +278,7 @@ class TrolleyTwin:
         # C_n0^n = C_e^n C_n0^e = C_e^n (C_e^n0)^T
         C_n_n0 = [[sum(C_e_n[i][k] * tr.C_e_n0[j][k] for k in range(3)) for j in range(3)] for i in range(3)]
         v_n = _m(C_n_n0, [g.r1[i] * sd for i in range(3)])
-        Cb0 = _rot_zyx(g.psi, g.theta, g.phi)
+        Cb0 = _rot_zyx(g)
         Cbn = [[sum(C_n_n0[i][k] * Cb0[k][j] for k in range(3)) for j in range(3)] for i in range(3)]
         sl, cl = math.sin(lat), math.cos(lat)
         x = 1.0 - earth.E2 * sl * sl
@@ -312,13 +310,13 @@ class TrolleyTwin:
             hp = (b - a) / n
             for j in range(n):
                 m = a + (j + 0.5) * hp
-                for x, w in zip(GL4_X, GL4_W):
-                    for t in (m - 0.5 * hp * x, m + 0.5 * hp * x):
-                        wb, fb, pr = self._node(t, end, C_n_n0)
-                        for k in range(3):
-                            dth[k] += 0.5 * hp * w * wb[k]
-                            dv[k] += 0.5 * hp * w * fb[k]
-                        path += 0.5 * hp * w * pr
+                for x, w in GL3:
+                    wb, fb, pr = self._node(m + 0.5 * hp * x, end, C_n_n0)
+                    wq = 0.5 * hp * w
+                    for k in range(3):
+                        dth[k] += wq * wb[k]
+                        dv[k] += wq * fb[k]
+                    path += wq * pr
         return dth, dv, path
 
     def outputs_over(self, ta: float, tb: float, h: float = 0.0) -> dict:

@@ -42,7 +42,8 @@ typedef struct {
 
 typedef struct {
     double r[3], r1[3], r2[3], q[3];
-    double psi, theta, phi, dpsi, dtheta, dphi;
+    /* attitude in n0 as cosines and sines (C_b^n0 = R3(psi) R2(theta) R1(phi)), no trig */
+    double cpsi, spsi, cth, sth, cphi, sphi, dpsi, dtheta, dphi;
 } TrackPoint;
 
 static void tg_free(TrackGeom *g) {
@@ -344,7 +345,7 @@ static void tg_offsets(const TrackGeom *G, double s, double o[6]) {
 static void tg_point(const TrackGeom *G, double s, int position, TrackPoint *P) {
     TgAngles a;
     double den, ct, st, th1, sc, cc, H[3], Y[3], T[3], Z[3], T1[3], Y1[3], Y2[3];
-    double o[6], w[6] = {0, 0, 0, 0, 0, 0}, q1[3], hh, h, dh, sphi;
+    double o[6], w[6] = {0, 0, 0, 0, 0, 0}, q1[3], hh, h, dh, nq;
     int i;
     tg_angles(G, s, &a);
     den = 1.0 + a.g * a.g;
@@ -387,14 +388,15 @@ static void tg_point(const TrackGeom *G, double s, int position, TrackPoint *P) 
     }
     hh = P->q[0] * P->q[0] + P->q[1] * P->q[1];
     h = sqrt(hh);
-    P->psi = atan2(P->q[1], P->q[0]);
-    P->theta = atan2(-P->q[2], h);
+    nq = sqrt(hh + P->q[2] * P->q[2]);
+    P->cpsi = P->q[0] / h, P->spsi = P->q[1] / h;
+    P->cth = h / nq, P->sth = -P->q[2] / nq;
     P->dpsi = (P->q[0] * q1[1] - P->q[1] * q1[0]) / hh;
     dh = (P->q[0] * q1[0] + P->q[1] * q1[1]) / h;
     P->dtheta = (-h * q1[2] + P->q[2] * dh) / (hh + P->q[2] * P->q[2]);
-    sphi = a.c / TG_RAIL_BASE;
-    P->phi = asin(sphi);
-    P->dphi = a.dc / (TG_RAIL_BASE * sqrt(1.0 - sphi * sphi));
+    P->sphi = a.c / TG_RAIL_BASE;
+    P->cphi = sqrt(1.0 - P->sphi * P->sphi);
+    P->dphi = a.dc / (TG_RAIL_BASE * P->cphi);
 }
 
 /* ---- setup -------------------------------------------------------------------------------- */

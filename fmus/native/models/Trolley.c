@@ -18,8 +18,8 @@
 
 enum { REST, ACCELERATE, CRUISE, BRAKE };
 #define MAX_PANEL 0.02 /* s */
-static const double GL4_X[2] = {0.33998104358485626, 0.8611363115940526};
-static const double GL4_W[2] = {0.6521451548625464, 0.34785484513745357};
+/* 3-point Gauss-Legendre on [-1, 1]: nodes 0, +-sqrt(3/5), weights 8/9, 5/9 */
+static const double GL3_X = 0.7745966692414834, GL3_W0 = 0.8888888888888888, GL3_W1 = 0.5555555555555556;
 
 typedef struct {
     double t0, s0, v, T;
@@ -183,9 +183,9 @@ oom:
     return 1;
 }
 
-static void rot_zyx(double psi, double theta, double phi, double C[3][3]) {
-    const double cp = cos(psi), sp = sin(psi), ct = cos(theta), st = sin(theta), cf = cos(phi),
-                 sf = sin(phi);
+/* C_b^n0 = R3(psi) R2(theta) R1(phi) from the point's cosines and sines */
+static void rot_zyx(const TrackPoint *P, double C[3][3]) {
+    const double cp = P->cpsi, sp = P->spsi, ct = P->cth, st = P->sth, cf = P->cphi, sf = P->sphi;
     C[0][0] = cp * ct, C[0][1] = cp * st * sf - sp * cf, C[0][2] = cp * st * cf + sp * sf;
     C[1][0] = sp * ct, C[1][1] = sp * st * sf + cp * cf, C[1][2] = sp * st * cf - cp * sf;
     C[2][0] = -st, C[2][1] = ct * sf, C[2][2] = ct * cf;
@@ -223,9 +223,9 @@ static void node(const Trolley *d, double t, const EndPoint *e, double wb[3], do
     f[0] = a[0] + 2.0 * (om[1] * v[2] - om[2] * v[1]) - gn0[0];
     f[1] = a[1] + 2.0 * (om[2] * v[0] - om[0] * v[2]) - gn0[1];
     f[2] = a[2] + 2.0 * (om[0] * v[1] - om[1] * v[0]) - gn0[2];
-    rot_zyx(P.psi, P.theta, P.phi, C);
+    rot_zyx(&P, C);
     mul_t(C, f, fb);
-    sf = sin(P.phi), cf = cos(P.phi), st = sin(P.theta), ct = cos(P.theta);
+    sf = P.sphi, cf = P.cphi, st = P.sth, ct = P.cth;
     dphi = P.dphi * sd, dth = P.dtheta * sd, dpsi = P.dpsi * sd;
     mul_t(C, om, we);
     wb[0] = dphi - dpsi * st + we[0];
@@ -254,7 +254,7 @@ static void end_state(ModelInstance *m, const Trolley *d, double t, EndPoint *e)
         }
     for (i = 0; i < 3; i++) vn0[i] = P.r1[i] * sd;
     mul(e->Cnn0, vn0, vn);
-    rot_zyx(P.psi, P.theta, P.phi, Cb0);
+    rot_zyx(&P, Cb0);
     for (i = 0; i < 3; i++)
         for (j = 0; j < 3; j++) {
             Cbn[i][j] = 0.0;
@@ -300,23 +300,22 @@ static void increments(const Trolley *d, double ta, double tb, const EndPoint *e
         const double b = (lo < d->nsplits && d->splits[lo] < tb) ? d->splits[lo] : tb;
         double q = (b - a) / MAX_PANEL - 1e-9, hp;
         unsigned long n = q > 0 ? (unsigned long)q : 0, j;
-        int k, sgn;
+        int k;
         if ((double)n < q) n++;
         if (n < 1) n = 1;
         hp = (b - a) / (double)n;
         for (j = 0; j < n; j++) {
             const double mid = a + ((double)j + 0.5) * hp;
-            for (k = 0; k < 2; k++)
-                for (sgn = -1; sgn <= 1; sgn += 2) {
-                    double wb[3], fb[3], pr;
-                    const double wq = 0.5 * hp * GL4_W[k];
-                    node(d, mid + sgn * 0.5 * hp * GL4_X[k], e, wb, fb, &pr);
-                    for (i = 0; i < 3; i++) {
-                        dth[i] += wq * wb[i];
-                        dv[i] += wq * fb[i];
-                    }
-                    *path += wq * pr;
+            for (k = -1; k <= 1; k++) {
+                double wb[3], fb[3], pr;
+                const double wq = 0.5 * hp * (k ? GL3_W1 : GL3_W0);
+                node(d, mid + k * 0.5 * hp * GL3_X, e, wb, fb, &pr);
+                for (i = 0; i < 3; i++) {
+                    dth[i] += wq * wb[i];
+                    dv[i] += wq * fb[i];
                 }
+                *path += wq * pr;
+            }
         }
         if (b >= tb) break;
         a = b;
