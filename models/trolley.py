@@ -82,6 +82,7 @@ from typing import Mapping
 from .base import Model, Output, Parameter
 from .base import STEP_TOLERANCE
 from . import earth
+from . import track_geometry
 from .track_geometry import (DEFAULT_IRREGULARITY, DEFAULT_PLACEMENT, DEFAULT_TRACK, Alignment,
                              TrackGeometry, ecef_to_lla)
 
@@ -449,7 +450,7 @@ def build() -> Model:
         default_experiment=(0.0, 700.0, 0.005),
         c_sources=["Earth.h", "TrackGeometry.h", "Trolley.c"],
         resources={"trolley_track.csv": DEFAULT_TRACK},
-        documentation=__doc__,
+        documentation=__doc__ + "\n\n" + track_geometry.__doc__,
     )
 
 
