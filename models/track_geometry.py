@@ -83,6 +83,15 @@ phases ``2 pi u`` from SplitMix64(``irregularity_seed``): first the N alignment 
 then the N level phases. Few lines keep the FMU's step cheap; the variance is the Riemann
 sum of the spectrum over the band.
 
+A **measured table** (``irregularity_file``, added to the above) has the format of the
+``TrackIrregularity`` FMU's ``profile_file`` (``models/track.py``): header
+``s,alignment,vertical_left,vertical_right`` (m, ``s`` strictly increasing), interpolated by
+the same cubic Hermite splines with Catmull-Rom slopes; ``y`` is its alignment and ``z`` the
+vertical profile ``(vertical_left + vertical_right) / 2``, signs as ``y`` and ``z`` here
+(right, down). It must cover the whole track (no jump where it would end). Its second
+derivative jumps at every row, so the Trolley splits its quadrature there too
+(:attr:`TrackGeometry.kinks`).
+
 Chord irregularity (Jiang et al. (2017), eqs. 1, 13-15)
 -------------------------------------------------------
 For a chord from ``a = p(c)`` to ``b = p(c + l_c)`` (n0 frame) the c-frame is n0 turned by
@@ -119,7 +128,7 @@ import numpy as np
 from fmus.errors import UserError
 
 from . import earth
-from .track import SplitMix64, psd_alignment, psd_vertical
+from .track import ProfileTable, SplitMix64, psd_alignment, psd_vertical
 
 HERE = Path(__file__).resolve().parent
 DEFAULT_TRACK = HERE / "data" / "trolley_track.csv"
@@ -144,7 +153,7 @@ DEFAULT_PLACEMENT = {"start_latitude": math.radians(30.5), "start_longitude": ma
 DEFAULT_IRREGULARITY = {"irregularity_level": 1, "irregularity_scale": 1.0, "irregularity_lines": 32,
                         "lambda_min": 2.0, "lambda_max": 120.0, "irregularity_seed": 1,
                         "harmonic_lateral_amplitude": 0.0, "harmonic_vertical_amplitude": 0.0,
-                        "harmonic_wavelength": 20.0,
+                        "harmonic_wavelength": 20.0, "irregularity_file": "",
                         "wobble_lateral": 0.0, "wobble_vertical": 0.0, "wobble_wavelength": 2.0}
 
 
@@ -327,6 +336,7 @@ def check_geometry_parameters(p: Mapping) -> None:
     need(p["lambda_max"] > p["lambda_min"], "lambda_max", "must be greater than lambda_min")
     need(p["harmonic_wavelength"] > 0, "harmonic_wavelength", "must be > 0 m")
     need(p["wobble_wavelength"] > 0, "wobble_wavelength", "must be > 0 m")
+    need(isinstance(p["irregularity_file"], str), "irregularity_file", "must be a file name (or empty)")
     for name in ("harmonic_lateral_amplitude", "harmonic_vertical_amplitude", "wobble_lateral",
                  "wobble_vertical"):
         need(abs(p[name]) < 0.1, name, "must be below 0.1 m in size")
@@ -369,9 +379,11 @@ class Point:
 class TrackGeometry:
     """Design alignment + irregularities + wobble. ``params`` override
     :data:`DEFAULT_PLACEMENT` and :data:`DEFAULT_IRREGULARITY`; ``alignment`` an
-    :class:`Alignment` or a table path (default the shipped table)."""
+    :class:`Alignment` or a table path (default the shipped table); a relative
+    ``irregularity_file`` is read from ``base_dir`` (the FMU: its resources/)."""
 
-    def __init__(self, params: Mapping | None = None, alignment: Alignment | Path | str | None = None):
+    def __init__(self, params: Mapping | None = None, alignment: Alignment | Path | str | None = None,
+                 base_dir: Path | str | None = None):
         self.p = {**DEFAULT_PLACEMENT, **DEFAULT_IRREGULARITY, **(params or {})}
         check_geometry_parameters(self.p)
         self.al = alignment if isinstance(alignment, Alignment) else Alignment.read(alignment or DEFAULT_TRACK)
@@ -381,6 +393,17 @@ class TrackGeometry:
             L = al.hs[i + 1] - al.hs[i]
             self.chi.append(self.chi[i] + 0.5 * (al.k0[i] + al.k1[i]) * L)
         self.lines = irregularity_lines(self.p)
+        self.table = None
+        f = self.p["irregularity_file"]
+        if f:
+            path = Path(f) if Path(f).is_absolute() else Path(base_dir or ".") / f
+            try:
+                self.table = ProfileTable.from_csv(path)
+            except ValueError as e:
+                raise UserError(str(e).replace("profile_file", "irregularity_file", 1)) from None
+            if self.table.s[0] > 0.0 or self.table.s[-1] < al.length:
+                raise UserError(f"irregularity_file {path}: covers s = {self.table.s[0]:g}..{self.table.s[-1]:g} m, "
+                                f"the track needs 0..{al.length:g} m")
         self._phase = [(math.cos(a), math.sin(a), math.cos(b), math.sin(b))
                        for a, b in zip(self.lines.phase_y.tolist(), self.lines.phase_z.tolist())]
         # design positions at the pieces' ends
@@ -397,6 +420,15 @@ class TrackGeometry:
     @property
     def length(self) -> float:
         return self.al.length
+
+    @property
+    def kinks(self) -> list[float]:
+        """Where some derivative of the geometry jumps, inside (0, length): the element ends
+        and the rows of a measured irregularity table."""
+        k = set(self.al.breakpoints)
+        if self.table is not None:
+            k |= {float(x) for x in self.table.s if 0.0 < x < self.length}
+        return sorted(k)
 
     # -- design angles --
     def angles(self, s: float):
@@ -462,6 +494,10 @@ class TrackGeometry:
             sn, cs = math.sin(w * s), math.cos(w * s)
             y, y1, y2 = y + Ay * sn, y1 + Ay * w * cs, y2 - Ay * w * w * sn
             z, z1, z2 = z + Az * sn, z1 + Az * w * cs, z2 - Az * w * w * sn
+        if self.table is not None:
+            ta, tl, tr = _hermite2(self.table, s)
+            y, y1, y2 = y + ta[0], y1 + ta[1], y2 + ta[2]
+            z, z1, z2 = z + 0.5 * (tl[0] + tr[0]), z1 + 0.5 * (tl[1] + tr[1]), z2 + 0.5 * (tl[2] + tr[2])
         return y, y1, y2, z, z1, z2
 
     def wobble(self, s: float):
@@ -545,6 +581,28 @@ class TrackGeometry:
         too): (alignment, level) in m."""
         return chord_irregularity(self.rail_positions, self.design_positions, s, chord_start,
                                   chord_length, offset)
+
+
+def _hermite2(table: ProfileTable, s: float):
+    """The table's cubic Hermite (Catmull-Rom slopes) at s: (value, d/ds, d2/ds2) of each of
+    its three columns; the row interval is the last with s_i <= s (the C's arithmetic)."""
+    ts = table.s
+    i = min(max(bisect.bisect_right(ts.tolist(), s) - 1, 0), ts.size - 2)
+    h = float(ts[i + 1] - ts[i])
+    t = (s - float(ts[i])) / h
+    t2 = t * t
+    out = []
+    for c in range(3):
+        y0, y1 = float(table.values[c, i]), float(table.values[c, i + 1])
+        m0, m1 = float(table.slopes[c, i]), float(table.slopes[c, i + 1])
+        v = (2.0 * t2 * t - 3.0 * t2 + 1.0) * y0 + (t2 * t - 2.0 * t2 + t) * h * m0 \
+            + (-2.0 * t2 * t + 3.0 * t2) * y1 + (t2 * t - t2) * h * m1
+        d = ((6.0 * t2 - 6.0 * t) * y0 + (-6.0 * t2 + 6.0 * t) * y1) / h \
+            + (3.0 * t2 - 4.0 * t + 1.0) * m0 + (3.0 * t2 - 2.0 * t) * m1
+        d2 = ((12.0 * t - 6.0) * y0 + (6.0 - 12.0 * t) * y1) / (h * h) \
+            + ((6.0 * t - 4.0) * m0 + (6.0 * t - 2.0) * m1) / h
+        out.append((v, d, d2))
+    return out
 
 
 def ecef_to_lla(x: float, y: float, z: float) -> tuple[float, float, float]:

@@ -222,16 +222,19 @@ def _cross(a, b):
 class TrolleyTwin:
     """Python twin of the Trolley FMU: :meth:`outputs` at the end of an interval."""
 
-    def __init__(self, params: Mapping | None = None, track_file: str | Path | None = None):
+    def __init__(self, params: Mapping | None = None, track_file: str | Path | None = None,
+                 base_dir: str | Path | None = None):
+        """``track_file`` defaults to the shipped table; a relative ``irregularity_file`` is
+        read from ``base_dir`` (the FMU reads it from its resources/)."""
         self.p = {**TROLLEY.default_parameters(), **(params or {})}
         p = self.p
         check_trolley_parameters(p)
         self.track = TrackGeometry({k: p[k] for k in (*DEFAULT_PLACEMENT, *DEFAULT_IRREGULARITY)},
-                                   Alignment.read(track_file or DEFAULT_TRACK))
+                                   Alignment.read(track_file or DEFAULT_TRACK), base_dir)
         self.profile = SpeedProfile(self.track.length, p["speed"], p["acceleration"], p["stop_spacing"],
                                     p["stop_duration"], p["static_duration"])
         splits = set(self.profile.t0[1:])
-        for b in self.track.al.breakpoints:
+        for b in self.track.kinks:
             t = self.profile.time_at(b)
             if t is not None:
                 splits.add(t)
@@ -403,6 +406,10 @@ def build() -> Model:
                   source="choice"),
         Parameter("harmonic_wavelength", "Wavelength of the harmonic irregularity", "m", 20.0,
                   source="choice"),
+        Parameter("irregularity_file", "Measured alignment/level table added to the spectrum: CSV "
+                  "s,alignment,vertical_left,vertical_right (m; as TrackIrregularity's profile_file), "
+                  "covering the track; absolute or relative to resources/; none when empty",
+                  start="", type="String", source="models/track_geometry.py"),
         Parameter("wobble_lateral", "Lateral wobble of the body off the rail (wheel-rail play)", "m", 0.0,
                   source="choice: 0 keeps the non-holonomic constraint exact"),
         Parameter("wobble_vertical", "Vertical wobble of the body off the rail", "m", 0.0, source="choice"),

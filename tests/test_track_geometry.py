@@ -229,3 +229,30 @@ def test_missing_table_and_bad_header(tmp_path):
     with pytest.raises(UserError, match="line 1: header must be"):
         Alignment.read(p)
     assert Alignment.read(DEFAULT_TRACK).length == 600.0
+
+
+def test_measured_table_hermite_and_coverage(tmp_path):
+    """The measured table (TrackIrregularity's profile format): Catmull-Rom slopes are exact
+    for a quadratic, so inside the table the Hermite reproduces y = a + b s + c s^2 with its
+    derivatives 2 c exactly; level = (left + right) / 2; the rows are quadrature kinks."""
+    s = np.arange(-2.0, 603.0, 0.5)
+    y = 1e-3 + 2e-6 * s - 3e-9 * s**2
+    f = tmp_path / "m.csv"
+    f.write_text("s,alignment,vertical_left,vertical_right\n" +
+                 "".join(f"{a!r},{b!r},{b + 1e-3!r},{b - 3e-4!r}\n" for a, b in zip(s.tolist(), y.tolist())))
+    tr = TrackGeometry({**FLAT, "irregularity_file": str(f)})
+    for x in (0.0, 13.37, 300.25, 599.9):
+        o = tr.offsets(x)
+        ye, d1, d2 = 1e-3 + 2e-6 * x - 3e-9 * x * x, 2e-6 - 6e-9 * x, -6e-9
+        assert o[0] == pytest.approx(ye, abs=1e-17) and o[1] == pytest.approx(d1, abs=1e-16)
+        assert o[2] == pytest.approx(d2, abs=1e-16)
+        assert o[3] == pytest.approx(ye + 3.5e-4, abs=1e-17) and o[5] == pytest.approx(d2, abs=1e-16)
+    assert len(tr.kinks) == len(set(tr.al.breakpoints) | {x for x in s if 0 < x < 600})
+    short = tmp_path / "short.csv"
+    short.write_text("s,alignment,vertical_left,vertical_right\n0,0,0,0\n100,0,0,0\n")
+    with pytest.raises(UserError, match=r"irregularity_file .*short.csv: covers s = 0..100 m, the track needs 0..600 m"):
+        TrackGeometry({"irregularity_file": str(short)})
+    bad = tmp_path / "bad.csv"
+    bad.write_text("s,alignment,vertical_left,vertical_right\n0,0,0,0\n0,0,0,0\n")
+    with pytest.raises(UserError, match="irregularity_file"):
+        TrackGeometry({"irregularity_file": str(bad)})

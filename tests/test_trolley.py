@@ -320,3 +320,32 @@ def test_libcosim_gives_the_same_numbers(fmu_dir):
         tol = 1e-15 if name in ANGLES else 1e-12 * np.abs(ours[name]).max()
         assert np.abs(x - ours[name]).max() <= tol, name
     assert np.ptp(ours["north"]) > 0.3  # it moved
+
+
+def test_measured_irregularity_table(fmu_dir, tmp_path):
+    """A measured table (rows every 0.25 m): C equals the twin at steps across its rows, and
+    the increments stay additive there (the quadrature splits at every row)."""
+    s = np.arange(-1.0, 601.0, 0.25)
+    a = 1e-3 * np.sin(2 * np.pi * s / 7.0) + 0.5e-3 * np.cos(2 * np.pi * s / 23.0)
+    vl = 0.8e-3 * np.sin(2 * np.pi * s / 11.0)
+    f = tmp_path / "measured.csv"
+    f.write_text("s,alignment,vertical_left,vertical_right\n" +
+                 "".join(f"{x!r},{y!r},{z!r},{z + 2e-4!r}\n" for x, y, z in zip(s.tolist(), a.tolist(), vl.tolist())))
+    params = {"irregularity_file": str(f), "irregularity_level": 0, "static_duration": 1.0}
+    r5, r10 = run(fmu_dir, 0.005, 12.0, params), run(fmu_dir, 0.01, 12.0, params)
+    tw = TrolleyTwin(params)
+    for k in range(400, 2400, 37):
+        o = tw.outputs_over(r5["interval_start"][k], r5["t"][k], 0.005)
+        for name in ("dtheta_x", "dtheta_y", "dtheta_z", "dv_x", "dv_y", "dv_z", "north", "east", "down",
+                     "latitude", "roll", "pitch", "vn", "vd"):
+            tol = 2e-15 if name in ANGLES else 1e-15 + 1e-12 * abs(o[name])
+            assert abs(r5[name][k] - o[name]) <= tol, (k, name)
+    for k in range(1, r10["t"].size):
+        for name, scale in (("dtheta", 1e-2), ("dv", 10.0)):
+            for ax in "xyz":
+                e = abs(r10[f"{name}_{ax}"][k] - r5[f"{name}_{ax}"][2 * k - 1] - r5[f"{name}_{ax}"][2 * k])
+                assert e < 1e-13 * scale, (k, name, ax, e)
+    with Slave(fmu_dir / "Trolley.fmu") as sl:
+        f.write_text("s,alignment,vertical_left,vertical_right\n0,0,0,0\n100,0,0,0\n")
+        with pytest.raises(FMUError, match=r"covers s = 0..100 m, the track needs 0..600 m"):
+            sl.initialize(0.0, parameters={"irregularity_file": str(f)})

@@ -37,6 +37,10 @@ typedef struct {
     int nlines;
     double *omega, *ay, *az, *cpy, *spy, *cpz, *spz; /* cos, sin of the phases */
     double harm_y, harm_z, harm_w, wob_y, wob_z, wob_w;
+    size_t nt;                    /* measured table rows (0: none) */
+    double *ts, *ty, *tm;         /* s, values and Catmull-Rom slopes (3 columns per row) */
+    double *kinks;                /* element ends and table rows inside (0, length) */
+    size_t nk;
     double r0e[3], Cen0[3][3], omega_n0[3];
 } TrackGeom;
 
@@ -51,6 +55,7 @@ static void tg_free(TrackGeom *g) {
     free(g->hs), free(g->k0), free(g->k1), free(g->c0), free(g->c1), free(g->chi);
     free(g->vs), free(g->g0), free(g->g1), free(g->pieces), free(g->P);
     free(g->omega), free(g->ay), free(g->az), free(g->cpy), free(g->spy), free(g->cpz), free(g->spz);
+    free(g->ts), free(g->ty), free(g->tm), free(g->kinks);
     memset(g, 0, sizeof *g);
 }
 
@@ -256,6 +261,111 @@ fail:
     return 1;
 }
 
+static size_t tg_find(const double *x, size_t n, double s);
+
+/* The measured table (models/track_geometry.py: the TrackIrregularity profile_file format);
+   after tg_read (it must cover 0..length). 1 after one model_error. */
+static int tg_read_table(ModelInstance *m, TrackGeom *g, const char *file) {
+    static const char *const header[4] = {"s", "alignment", "vertical_left", "vertical_right"};
+    char *path, line[4096];
+    FILE *f;
+    size_t cap = 0, n = 0, i;
+    long lineno = 0;
+    int c;
+    if (!*file) return 0;
+    path = model_resolve_path(m, file);
+    if (!path) {
+        model_error(m, "irregularity_file %s: a relative path needs the FMU's resources folder (use an "
+                       "absolute path)", file);
+        return 1;
+    }
+    f = fopen(path, "rb");
+    if (!f) {
+        model_error(m, "irregularity_file %s: cannot open (%s)", path, strerror(errno));
+        free(path);
+        return 1;
+    }
+    while (fgets(line, sizeof line, f)) {
+        char *fld[5], *s = line, *q;
+        size_t nf = 0;
+        lineno++;
+        s[strcspn(s, "\n")] = '\0';
+        if (lineno > 1 && *tg_trim(s) == '\0') continue;
+        for (;;) {
+            q = strchr(s, ',');
+            if (q) *q = '\0';
+            if (nf < 5) fld[nf] = tg_trim(s);
+            nf++;
+            if (!q) break;
+            s = q + 1;
+        }
+        if (lineno == 1) {
+            for (c = 0; c < 4 && nf == 4; c++)
+                if (strcmp(fld[c], header[c]) != 0) break;
+            if (nf != 4 || c != 4)
+                TG_FAIL("irregularity_file %s:1: header must be s,alignment,vertical_left,vertical_right", path);
+            continue;
+        }
+        if (nf != 4) TG_FAIL("irregularity_file %s:%ld: expected 4 comma-separated numbers", path, lineno);
+        if (n == cap) {
+            const size_t nc = cap ? 2 * cap : 256;
+            double *a = (double *)realloc(g->ts, nc * sizeof(double)), *b;
+            if (a) g->ts = a;
+            b = a ? (double *)realloc(g->ty, 3 * nc * sizeof(double)) : NULL;
+            if (!b) TG_FAIL("irregularity_file %s: out of memory", path);
+            g->ty = b;
+            cap = nc;
+        }
+        for (c = 0; c < 4; c++) {
+            double x;
+            if (tg_number(fld[c], &x)) TG_FAIL("irregularity_file %s:%ld: not a number: '%s'", path, lineno, fld[c]);
+            if (c == 0) g->ts[n] = x;
+            else g->ty[3 * n + c - 1] = x;
+        }
+        if (n > 0 && !(g->ts[n] > g->ts[n - 1]))
+            TG_FAIL("irregularity_file %s:%ld: s = %g is not greater than the previous s = %g", path, lineno,
+                    g->ts[n], g->ts[n - 1]);
+        n++;
+    }
+    if (n < 2) TG_FAIL("irregularity_file %s: needs at least two data rows", path);
+    if (g->ts[0] > 0.0 || g->ts[n - 1] < g->hs[g->nh])
+        TG_FAIL("irregularity_file %s: covers s = %g..%g m, the track needs 0..%g m", path, g->ts[0],
+                g->ts[n - 1], g->hs[g->nh]);
+    g->tm = (double *)malloc(3 * n * sizeof(double));
+    if (!g->tm) TG_FAIL("irregularity_file %s: out of memory", path);
+    for (c = 0; c < 3; c++) { /* Catmull-Rom: central differences, one-sided at the ends */
+        const double *S = g->ts, *Y = g->ty;
+        g->tm[c] = (Y[3 + c] - Y[c]) / (S[1] - S[0]);
+        for (i = 1; i + 1 < n; i++) g->tm[3 * i + c] = (Y[3 * (i + 1) + c] - Y[3 * (i - 1) + c]) / (S[i + 1] - S[i - 1]);
+        g->tm[3 * (n - 1) + c] = (Y[3 * (n - 1) + c] - Y[3 * (n - 2) + c]) / (S[n - 1] - S[n - 2]);
+    }
+    g->nt = n;
+    fclose(f);
+    free(path);
+    return 0;
+fail:
+    fclose(f);
+    free(path);
+    return 1;
+}
+
+/* value, d/ds, d2/ds2 of the table's three columns at s (o[3 c + k]) */
+static void tg_table(const TrackGeom *G, double s, double o[9]) {
+    const size_t i = tg_find(G->ts, G->nt - 1, s);
+    const double h = G->ts[i + 1] - G->ts[i], t = (s - G->ts[i]) / h, t2 = t * t;
+    int c;
+    for (c = 0; c < 3; c++) {
+        const double y0 = G->ty[3 * i + c], y1 = G->ty[3 * (i + 1) + c], m0 = G->tm[3 * i + c],
+                     m1 = G->tm[3 * (i + 1) + c];
+        o[3 * c] = (2.0 * t2 * t - 3.0 * t2 + 1.0) * y0 + (t2 * t - 2.0 * t2 + t) * h * m0 +
+                   (-2.0 * t2 * t + 3.0 * t2) * y1 + (t2 * t - t2) * h * m1;
+        o[3 * c + 1] = ((6.0 * t2 - 6.0 * t) * y0 + (-6.0 * t2 + 6.0 * t) * y1) / h +
+                       (3.0 * t2 - 4.0 * t + 1.0) * m0 + (3.0 * t2 - 2.0 * t) * m1;
+        o[3 * c + 2] = ((12.0 * t - 6.0) * y0 + (6.0 - 12.0 * t) * y1) / (h * h) +
+                       ((6.0 * t - 4.0) * m0 + (6.0 * t - 2.0) * m1) / h;
+    }
+}
+
 /* ---- evaluation --------------------------------------------------------------------------- */
 
 /* element index: hs[i] <= s < hs[i + 1], clamped */
@@ -336,6 +446,12 @@ static void tg_offsets(const TrackGeom *G, double s, double o[6]) {
         const double w = G->harm_w, sn = sin(w * s), cs = cos(w * s);
         o[0] += G->harm_y * sn, o[1] += G->harm_y * w * cs, o[2] -= G->harm_y * w * w * sn;
         o[3] += G->harm_z * sn, o[4] += G->harm_z * w * cs, o[5] -= G->harm_z * w * w * sn;
+    }
+    if (G->nt) {
+        double tb[9];
+        tg_table(G, s, tb);
+        o[0] += tb[0], o[1] += tb[1], o[2] += tb[2];
+        o[3] += 0.5 * (tb[3] + tb[6]), o[4] += 0.5 * (tb[4] + tb[7]), o[5] += 0.5 * (tb[5] + tb[8]);
     }
 }
 
@@ -447,6 +563,17 @@ static int tg_setup(ModelInstance *m, TrackGeom *G, double lat0, double lon0, do
         if (all[i] != G->pieces[G->np]) G->pieces[++G->np] = all[i];
     free(all);
     G->pieces[++G->np] = G->hs[G->nh];
+    /* kinks: the piece ends inside (0, length) and the table rows there, sorted, unique */
+    G->kinks = (double *)malloc((G->np + G->nt + 1) * sizeof(double));
+    if (!G->kinks) goto oom;
+    n = 0;
+    for (i = 1; i < G->np; i++) G->kinks[n++] = G->pieces[i];
+    for (i = 0; i < G->nt; i++)
+        if (G->ts[i] > 0.0 && G->ts[i] < G->hs[G->nh]) G->kinks[n++] = G->ts[i];
+    qsort(G->kinks, n, sizeof(double), tg_cmp);
+    G->nk = 0;
+    for (i = 0; i < n; i++)
+        if (G->nk == 0 || G->kinks[i] != G->kinks[G->nk - 1]) G->kinks[G->nk++] = G->kinks[i];
     G->P = (double *)calloc(3 * (G->np + 1), sizeof(double));
     if (!G->P) goto oom;
     for (i = 0; i < G->np; i++) {

@@ -166,12 +166,12 @@ static int build_profile(ModelInstance *m, Trolley *d) {
         t += r[VR_stop_duration];
     }
     /* quadrature splits: phase starts and the times element ends are passed, sorted */
-    d->splits = (double *)malloc((d->nph + d->G.nh + d->G.nv) * sizeof(double));
+    d->splits = (double *)malloc((d->nph + d->G.nk + 1) * sizeof(double));
     if (!d->splits) goto oom;
     for (i = 1; i < d->nph; i++) d->splits[n++] = d->ph[i].t0;
-    for (i = 1; i < d->G.np; i++) {
+    for (i = 0; i < d->G.nk; i++) {
         double tb;
-        if (time_at(d, d->G.pieces[i], &tb)) d->splits[n++] = tb;
+        if (time_at(d, d->G.kinks[i], &tb)) d->splits[n++] = tb;
     }
     qsort(d->splits, n, sizeof(double), tg_cmp);
     d->nsplits = 0;
@@ -381,6 +381,7 @@ static int load(ModelInstance *m) {
         return 1;
     }
     if (tg_read(m, &d->G, m->s[VRS_track_file] ? m->s[VRS_track_file] : "") ||
+        tg_read_table(m, &d->G, m->s[VRS_irregularity_file] ? m->s[VRS_irregularity_file] : "") ||
         tg_setup(m, &d->G, r[VR_start_latitude], r[VR_start_longitude], r[VR_start_height], r[VR_azimuth],
                  (int)m->i[VRI_irregularity_level], r[VR_irregularity_scale], (int)m->i[VRI_irregularity_lines],
                  r[VR_lambda_min], r[VR_lambda_max], (int)m->i[VRI_irregularity_seed],
