@@ -26,7 +26,8 @@ The body point is the rail centre line point plus the wobble, ``r(s) = p_rail(s)
 w_z D`` (lateral along the horizontal normal Y, vertical along the n0 vertical D, as the
 irregularities); the body axes are x along the true rail tangent ``q = dp_rail/ds`` (heading
 ``psi = atan2(q_E, q_N)``, pitch ``theta = atan2(-q_D, |q_NE|)`` in n0) and rolled by the
-cant, ``phi = asin(c / 1.5 m)``: ``C_b^n0 = R3(psi) R2(theta) R1(phi)``. The wobble moves the
+cant, ``phi = asin(c / 1.5 m)``: ``C_b^n0 = R3(psi) R2(theta) R1(phi)``, built from the
+direction cosines of ``q`` (no trigonometry per node). The wobble moves the
 body off the rail without turning it, so the body velocity has lateral and vertical
 components: the non-holonomic constraint is broken on purpose (default amplitude 0).
 
@@ -34,7 +35,7 @@ With ``s(t)`` from the speed profile, in the Earth-fixed frame n0 (``Omega`` = E
 in n0, ``r' = dr/ds``)::
 
     v = r' s_dot,        a = r'' s_dot^2 + r' s_ddot
-    omega_ib^b = E(phi, theta) (phi', theta', psi') s_dot + C_n0^b Omega
+    omega_ib^b = E(phi, theta) (phi', theta', psi') s_dot + C_n0^b Omega     (n0 is Earth-fixed)
     f^b        = C_n0^b (a + 2 Omega x v - g^n0)
 
 ``E`` the ZYX Euler-rate matrix and ``g`` normal gravity (``models.earth``: Somigliana,
@@ -49,9 +50,11 @@ Increments
 ----------
 ``dtheta = int omega_ib^b dt`` and ``dv = int f^b dt`` over the interval from the previous
 communication point to this one, by 3-point Gauss-Legendre quadrature on panels of at most
-20 ms (error ``~5e-7 h^7 max|f^(6)|``: 1e-18 for 2 m irregularity wavelengths at 1 m/s), split at every instant where the integrand is not smooth (the speed profile's phase
-ends, and the times the trolley passes element ends of the alignment, where the curvature
-rate, the cant rate or the vertical curvature jump). The interval is the one the importer
+20 ms (error ``~5e-7 h^7 max|f^(6)|``: 1e-18 m/s for 2 m irregularity wavelengths at
+1 m/s), split at every instant where the integrand is not smooth: the speed profile's phase
+ends, and the times the trolley passes the alignment's element ends (where the curvature
+rate, the cant rate or the vertical curvature jump) and the rows of a measured irregularity
+table (found once, by bisection of the closed-form ``s(t)``). The interval is the one the importer
 actually stepped: the FMU remembers the previous communication point (``interval_start``)
 and integrates up to the current one, so ``t = n h`` and ``t += h`` masters both get
 increments that tile their own time grid; the truth is a function of the time alone.
@@ -64,7 +67,7 @@ Outputs (at the communication point ``t``)
 n0 position from the design start point (the n0 origin; at ``t = 0`` the trolley sits the
 irregularity offset, millimetres, away from it); ``vn, ve, vd`` velocity in the local NED;
 ``roll, pitch, heading`` (rad) of ``C_b^n`` in the local NED (``heading`` in
-``(-pi, pi]``); ``distance`` = ``s`` (design arc length, m); ``speed`` = ``s_dot``;
+``(-pi, pi]``); ``distance`` = ``s`` (design arc length, m); ``speed_along`` = ``s_dot``;
 ``stopped`` true in the rest phases (a phase end within 1 % of the step counts as reached,
 as ``models.base.STEP_TOLERANCE``); ``path_length`` the length of the true rail path
 travelled (m, the same quadrature) and ``odometer = (1 + odometer_scale_ppm 1e-6)
@@ -288,9 +291,11 @@ class TrolleyTwin:
         x = 1.0 - earth.E2 * sl * sl
         RE = earth.A / math.sqrt(x)
         RN = RE * (1.0 - earth.E2) / x
-        g0 = earth.GE * (1.0 + earth.K_SOMIGLIANA * sl * sl) / math.sqrt(x)
+        k = earth.K_SOMIGLIANA
+        g0 = earth.GE * (1.0 + k * sl * sl) / math.sqrt(x)
         fh = 1.0 - 2.0 * h / earth.A
-        g0_l = earth.GE * sl * cl * (2.0 * earth.K_SOMIGLIANA * x + (1.0 + earth.K_SOMIGLIANA * sl * sl) * earth.E2) / (x * math.sqrt(x))
+        # d gamma / d L of Somigliana's formula (the gravity's change over a step's nodes)
+        g0_l = earth.GE * sl * cl * (2.0 * k * x + (1.0 + k * sl * sl) * earth.E2) / (x * math.sqrt(x))
         out = {"latitude": lat, "longitude": lon, "height": h,
                "north": g.r[0], "east": g.r[1], "down": g.r[2],
                "vn": v_n[0], "ve": v_n[1], "vd": v_n[2],

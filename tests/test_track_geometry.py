@@ -70,7 +70,8 @@ def test_parabolic_vertical_curve_against_closed_form(tmp_path):
         u = min(s, 250.0) - 100.0
         g = dg * u
         north = 100.0 + math.asinh(g) / dg + (s - 250.0 if s > 250 else 0.0) / math.sqrt(1 + 0.012**2)
-        up = g * g / (math.sqrt(1 + g * g) + 1) / dg + (s - 250.0 if s > 250 else 0.0) * 0.012 / math.sqrt(1 + 0.012**2)
+        up = (g * g / (math.sqrt(1 + g * g) + 1) / dg
+              + (s - 250.0 if s > 250 else 0.0) * 0.012 / math.sqrt(1 + 0.012**2))
         p = tr.design_position(s)
         assert p[0] == pytest.approx(north, abs=1e-11) and p[2] == pytest.approx(-up, abs=1e-12)
     assert tr.point(180.0).theta == pytest.approx(math.atan(dg * 80.0), abs=1e-15)
@@ -204,7 +205,8 @@ def test_positions_map_exactly_to_geodetic():
 @pytest.mark.parametrize("rows, message", [
     ("straight,0,50,,,\nstraight,40,100,,,\ngrade,0,100,,,0\n", r"line 3, column 2 \(start_m\): 40 must equal 50"),
     ("straight,0,50,,,\nstraight,50,45,,,\ngrade,0,45,,,0\n", r"line 3, column 3 \(end_m\): 45 is not greater"),
-    ("straight,0,50,,,\ncurve_left,50,100,-300,,\ngrade,0,100,,,0\n", r"line 3, column 4 \(radius_m\): a curve_left needs a radius > 0"),
+    ("straight,0,50,,,\ncurve_left,50,100,-300,,\ngrade,0,100,,,0\n",
+     r"line 3, column 4 \(radius_m\): a curve_left needs a radius > 0"),
     ("straight,0,50,,,\ncurve_left,50,100,300,250,\ngrade,0,100,,,0\n", r"line 3, column 5 \(cant_mm\)"),
     ("clothoid,0,50,,,\ncurve_left,50,100,300,,\ngrade,0,100,,,0\n", r"line 2, column 1 \(kind\): a clothoid needs"),
     ("straight,0,100,,,\nvertical_curve,0,100,,,\n", r"line 3, column 1 \(kind\): a vertical_curve needs a grade"),
@@ -250,7 +252,7 @@ def test_measured_table_hermite_and_coverage(tmp_path):
     assert len(tr.kinks) == len(set(tr.al.breakpoints) | {x for x in s if 0 < x < 600})
     short = tmp_path / "short.csv"
     short.write_text("s,alignment,vertical_left,vertical_right\n0,0,0,0\n100,0,0,0\n")
-    with pytest.raises(UserError, match=r"irregularity_file .*short.csv: covers s = 0..100 m, the track needs 0..600 m"):
+    with pytest.raises(UserError, match=r"short.csv: covers s = 0..100 m, the track needs 0..600 m"):
         TrackGeometry({"irregularity_file": str(short)})
     bad = tmp_path / "bad.csv"
     bad.write_text("s,alignment,vertical_left,vertical_right\n0,0,0,0\n0,0,0,0\n")

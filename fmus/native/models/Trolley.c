@@ -336,7 +336,8 @@ int model_check_parameters(ModelInstance *m) {
     CHECK(fabs(r[VR_start_latitude]) < 89.0 * TG_PI / 180.0, "start_latitude", r[VR_start_latitude],
           "must be within 89 deg of the equator (rad)");
     CHECK(isfinite(r[VR_start_longitude]), "start_longitude", r[VR_start_longitude], "must be finite (rad)");
-    CHECK(fabs(r[VR_start_height]) < 1e5, "start_height", r[VR_start_height], "must be within 100 km of the ellipsoid");
+    CHECK(fabs(r[VR_start_height]) < 1e5, "start_height", r[VR_start_height],
+          "must be within 100 km of the ellipsoid");
     CHECK(isfinite(r[VR_azimuth]), "azimuth", r[VR_azimuth], "must be finite (rad)");
     CHECK(m->i[VRI_irregularity_level] >= 0 && m->i[VRI_irregularity_level] <= 2, "irregularity_level",
           m->i[VRI_irregularity_level], "must be 0, 1 or 2");
