@@ -17,7 +17,7 @@
 #include "model.h"
 
 enum { REST, ACCELERATE, CRUISE, BRAKE };
-#define MAX_PANEL 0.02 /* s */
+#define MAX_PANEL 0.01 /* s: models/trolley.py MAX_PANEL */
 /* 3-point Gauss-Legendre on [-1, 1]: nodes 0, +-sqrt(3/5), weights 8/9, 5/9 */
 static const double GL3_X = 0.7745966692414834, GL3_W0 = 0.8888888888888888, GL3_W1 = 0.5555555555555556;
 
