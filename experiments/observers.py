@@ -16,6 +16,9 @@ both see the same samples):
   the observer updates with the channels present (its ``mask``);
 * **offline observers** (``offline="true"``: smoothers, batch identification) get the whole
   record once the run has ended and write ``estimates_<name>.csv``;
+* **FMU process models**: the setting ``process_component`` names a component whose FMU (one
+  more instance, the component's parameters) becomes the observer's ``process``
+  (:mod:`experiments.fmu_process`); it is freed when the run closes;
 * **settings bound to signals** (``rf:Setting name connector``): the observer is created
   again at its first sample with those settings set to the signals' values there, in its
   units (an INS started from the vehicle's true initial state).
@@ -43,9 +46,11 @@ from fmus.ssp.units import OURS, Units, conversion
 _STRIDE_RTOL = 1e-9
 
 
-def make_observer(spec: ObserverSpec, step_size: float, where: str):
+def make_observer(spec: ObserverSpec, step_size: float, where: str, system: System | None = None):
     """Import ``spec.cls`` and instantiate it at its sample period with the spec's settings;
-    returns ``(estimator, stride)`` (its period in system steps). A UserError if not possible."""
+    returns ``(estimator, stride)`` (its period in system steps). A UserError if not possible.
+    The setting ``process_component`` names a component of ``system`` whose FMU becomes the
+    estimator's process model (``process``; :mod:`experiments.fmu_process`)."""
     label = f"{where}: Observer {spec.name!r}"
     period = _period(spec, step_size)
     stride = round(period / step_size)
@@ -61,9 +66,16 @@ def make_observer(spec: ObserverSpec, step_size: float, where: str):
     if offline != spec.offline:
         raise UserError(f"{label}: {spec.cls} is an {'offline' if offline else 'online'} estimator; "
                         f"declare it with offline=\"{str(offline).lower()}\"")
+    settings = dict(spec.settings)
+    process = None
+    if "process_component" in settings:
+        process = _process_model(cls, str(settings.pop("process_component")), system, label, spec.name)
+        settings["process"] = process
     try:
-        obs = cls(period, **spec.settings)
+        obs = cls(period, **settings)
     except (TypeError, ValueError) as exc:
+        if process is not None:
+            process.close()
         raise UserError(f"{label}: bad settings: {exc}") from None
     for kind, declared, bound in (("measurements", obs.measurements, spec.measurements),
                                   ("inputs", obs.inputs, spec.inputs)):
@@ -81,6 +93,19 @@ def make_observer(spec: ObserverSpec, step_size: float, where: str):
     return obs, stride
 
 
+def _process_model(cls, name: str, system: System | None, label: str, observer: str):
+    """An FMU process model on component ``name`` of ``system`` (experiments.fmu_process)."""
+    from .fmu_process import process_model
+
+    try:
+        component = system.component(name) if system is not None else None
+    except KeyError:
+        component = None
+    if component is None:
+        raise UserError(f"{label}: process_component {name!r} is not a component of the system")
+    return process_model(cls, component, label, observer)
+
+
 def _period(spec: ObserverSpec, step_size: float) -> float:
     return spec.period if spec.period is not None else step_size
 
@@ -90,8 +115,12 @@ def bind_settings(feed: _Feed, row: np.ndarray, columns: list[int], where: str) 
     ``row`` (its first sample; ``columns`` their indices in ``row``), in the observer's units."""
     spec = feed.spec
     values = {k: a * float(row[i]) + b for k, i, (a, b) in zip(spec.setting_signals, columns, feed.set_map)}
+    settings = dict(spec.settings)
+    if "process_component" in settings:  # the FMU process model of the first instance, kept
+        settings.pop("process_component")
+        settings["process"] = getattr(feed.obs, "process", None)
     try:
-        feed.obs = type(feed.obs)(feed.period, **spec.settings, **values)
+        feed.obs = type(feed.obs)(feed.period, **settings, **values)
     except (TypeError, ValueError) as exc:
         raise UserError(f"{where}: Observer {spec.name!r}: bad settings from signals "
                         f"({', '.join(f'{k} = {spec.setting_signals[k]}' for k in values)}): {exc}") from None
@@ -185,7 +214,7 @@ class ObserverBank:
         self.online: list[_Feed] = []
         self.offline: list[_Feed] = []
         for spec in system.observers:
-            obs, stride = make_observer(spec, system.step_size, where)
+            obs, stride = make_observer(spec, system.step_size, where, system)
             feed = _Feed(spec, obs, stride, event=spec.event if spec.event is not None else obs.event_driven,
                          period=_period(spec, system.step_size))
             feed.set_map = [unit_map(spec, obs, "setting", k, sig, where) for k, sig in spec.setting_signals.items()]
@@ -270,6 +299,10 @@ class ObserverBank:
             self.recorder.close(complete)
         if complete and self.offline and self._record:
             self._run_offline()
+        for f in (*self.online, *self.offline):  # an FMU process model frees its instance
+            close = getattr(f.obs, "close", None)
+            if callable(close):
+                close()
 
     def _run_offline(self) -> None:
         """Each offline observer on the whole record (its own sample rows), to estimates_<name>.csv."""
