@@ -37,6 +37,9 @@ class TrolleyImuReplay(Study):
     """The INS on a replayed imu.csv, scored as ``trolley_survey`` scores it."""
     default_variant = "recorded"
     roles = ROLES
+    figures_of_signals = {"imu.png": ("Replayed IMU increments",
+                                      [[(f"imu.y_{k}", c) for k, c in enumerate(("dtheta_x", "dtheta_y", "dtheta_z"), 1)],
+                                       [(f"imu.y_{k}", c) for k, c in enumerate(("dv_x", "dv_y", "dv_z"), 4)]])}
     summary_metrics = tuple(metric_name(k, s) for k in ERRORS for s in ("", "_30s", "_60s")) + ("wall_time_s",)
 
     def metrics(self, run: RunData) -> dict:

@@ -153,6 +153,7 @@ class TrolleySurvey(Study):
     """The free-inertial trolley survey: INS errors per IMU grade, and the standard files."""
     default_variant = "ideal_imu"
     roles = ROLES
+    figures_of_signals: dict = {}  # not every recorded signal over 140,000 rows: the figures below
     summary_metrics = tuple(metric_name(k, s) for k in ERRORS for s in ("", "_30s", "_60s")) + ("wall_time_s",)
 
     def metrics(self, run: RunData) -> dict:
