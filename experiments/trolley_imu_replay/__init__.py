@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from experiments.study_protocol import RunData, Study, observers_md, output
-from experiments.trolley_survey import (ERRORS, NAV, UNITS, error_metrics, metric_name,
+from experiments.trolley_survey import (ERRORS, INCREMENTS, NAV, UNITS, error_metrics, metric_name,
                                         navigation_errors)
 
 DEG = math.pi / 180
@@ -33,22 +33,28 @@ ROLES = {**{f"truth_{c}": output("truth", f"y_{k}") for k, (c, _, _) in enumerat
          "truth_stopped": output("truth", "boolean_1")}
 
 
+def _arrays(run: RunData) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Times, INS estimates (n, 9) and the replayed truth (n, 9) in rad, m, m/s."""
+    t = np.asarray(run.estimates["time"])
+    n = len(t)
+    est = np.column_stack([np.asarray(run.estimates[f"ins.{k}"])[:n] for k in NAV])
+    true = np.column_stack([np.asarray(run.signals[run.roles[f"truth_{c}"]])[:n] * f
+                            for c, name, f in TRUTH if name])
+    return t, est, true
+
+
 class TrolleyImuReplay(Study):
     """The INS on a replayed imu.csv, scored as ``trolley_survey`` scores it."""
     default_variant = "recorded"
     roles = ROLES
     figures_of_signals = {"imu.png": ("Replayed IMU increments",
-                                      [[(f"imu.y_{k}", c) for k, c in enumerate(("dtheta_x", "dtheta_y", "dtheta_z"), 1)],
-                                       [(f"imu.y_{k}", c) for k, c in enumerate(("dv_x", "dv_y", "dv_z"), 4)]])}
+                                      [[(f"imu.y_{k}", c) for k, c in enumerate(INCREMENTS[:3], 1)],
+                                       [(f"imu.y_{k}", c) for k, c in enumerate(INCREMENTS[3:], 4)]])}
     summary_metrics = tuple(metric_name(k, s) for k in ERRORS for s in ("", "_30s", "_60s")) + ("wall_time_s",)
 
     def metrics(self, run: RunData) -> dict:
-        t = np.asarray(run.estimates["time"])
-        n = len(t)
-        est = np.column_stack([np.asarray(run.estimates[f"ins.{k}"])[:n] for k in NAV])
-        true = np.column_stack([np.asarray(run.signals[run.roles[f"truth_{c}"]])[:n] * f
-                                for c, name, f in TRUTH if name])
-        stopped = np.asarray(run.signals[run.roles["truth_stopped"]])[:n]
+        t, est, true = _arrays(run)
+        stopped = np.asarray(run.signals[run.roles["truth_stopped"]])[:len(t)]
         moving = np.flatnonzero(stopped == 0)
         start = float(t[moving[0] - 1]) if moving.size and moving[0] > 0 else float(t[0])
         return error_metrics(t, navigation_errors(est, true), start)
@@ -56,11 +62,7 @@ class TrolleyImuReplay(Study):
     def figures(self, run: RunData, out: Path) -> list[str]:
         from experiments.plots import figure
 
-        t = np.asarray(run.estimates["time"])
-        n = len(t)
-        est = np.column_stack([np.asarray(run.estimates[f"ins.{k}"])[:n] for k in NAV])
-        true = np.column_stack([np.asarray(run.signals[run.roles[f"truth_{c}"]])[:n] * f
-                                for c, name, f in TRUTH if name])
+        t, est, true = _arrays(run)
         e = navigation_errors(est, true)
         axes = [[(f"position {c}", 1e3 * e["position"][:, j], "mm") for j, c in enumerate("NED")],
                 [(f"velocity {c}", 1e3 * e["velocity"][:, j], "mm/s") for j, c in enumerate("NED")],
