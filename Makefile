@@ -32,6 +32,9 @@ bench: build
 	$(BIN)/python benchmarks/masters.py
 	$(BIN)/python benchmarks/overhead.py
 	$(BIN)/python benchmarks/train_ukf.py
+	$(BIN)/python benchmarks/process_model.py
+	$(BIN)/python benchmarks/strapdown.py
+	$(BIN)/python benchmarks/trolley_survey.py
 
 clean:
 	rm -rf build $(OUT) .pytest_cache
