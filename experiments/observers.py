@@ -60,7 +60,7 @@ def make_observer(spec: ObserverSpec, step_size: float, where: str):
                         f"declare it with offline=\"{str(offline).lower()}\"")
     try:
         obs = cls(period, **spec.settings)
-    except (TypeError, ValueError) as exc:
+    except (TypeError, ValueError, OSError) as exc:  # OSError: a file a setting names (a line profile)
         raise UserError(f"{label}: bad settings: {exc}") from None
     for kind, declared, bound in (("measurements", obs.measurements, spec.measurements),
                                   ("inputs", obs.inputs, spec.inputs)):
