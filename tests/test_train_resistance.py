@@ -239,3 +239,20 @@ def test_the_67_run_study(tmp_path, fmu_dir):
     assert s["ukf_paper.speed_rmse_kmh"]["p50"] <= 1.0  # the paper's UKF, as it comes out
     assert s["ukf_paper.position_rmse_m"]["p50"] <= 8.0
     assert wall <= 60.0, f"67 runs took {wall:.0f} s"
+
+
+@pytest.mark.parametrize("edit, message", [
+    (('connector="driver.line_file"', 'connector="driver.nope"'), "Target 'driver.nope': Driver.fmu has no variable 'nope'"),
+    (('name="line.file"', 'name="train.file"'), "the name must be group.parameter and the group no component or observer"),
+    (('setting="ukf_paper.line_file"', 'setting="nobody.line_file"'), "Target setting 'nobody.line_file': no Observer 'nobody'"),
+])
+def test_a_bad_system_parameter_is_one_line(edit, message, tmp_path, fmu_dir):
+    from fmus.errors import UserError
+    from fmus.ssp import read_system
+
+    exp = tmp_path / "exp"
+    shutil.copytree(ROOT / "experiments" / "train_resistance", exp)
+    ssd = exp / "SystemStructure.ssd"
+    ssd.write_text(ssd.read_text().replace(*edit))
+    with pytest.raises(UserError, match=message.replace("(", r"\(").replace(")", r"\)")):
+        read_system(exp, fmu_dirs=[fmu_dir])
