@@ -256,3 +256,10 @@ def test_a_bad_system_parameter_is_one_line(edit, message, tmp_path, fmu_dir):
     ssd.write_text(ssd.read_text().replace(*edit))
     with pytest.raises(UserError, match=message.replace("(", r"\(").replace(")", r"\)")):
         read_system(exp, fmu_dirs=[fmu_dir])
+
+
+def test_observers_must_sample_at_the_gnss_period(tmp_path, fmu_dir):
+    res = railfmu("run", "train_resistance", "--set", "gnss.sample_period=5", "--out", str(tmp_path))
+    assert res.returncode == 2 and "Traceback" not in res.stderr
+    assert res.stderr.strip().splitlines()[-1].endswith(
+        "Observer 'ukf_paper' samples every 10 s but the GNSS fixes come every 5 s: set ukf_paper.samplePeriod=5 too")

@@ -35,6 +35,7 @@ from pathlib import Path
 import numpy as np
 
 from experiments.study_protocol import RunData, Study, observers_md, output, parameter, truth
+from fmus.errors import UserError
 
 KMH = 1.0 / 3.6
 DEFAULT_VARIANT = "standard"
@@ -135,6 +136,18 @@ class TrainResistance(Study):
                        "truth.final_coast_min", "truth.final_brake_s", "truth.share_*", "wall_time_s")
 
     # ---- per run -----------------------------------------------------------------------------
+    def bind(self, system) -> dict:
+        """The roles, and the check that every observer of the GNSS samples at its period (a
+        ``--set gnss.sample_period`` alone would leave the observers at the old one)."""
+        roles = super().bind(system)
+        period = float(roles["gnss_period"])
+        for o in system.observers:
+            own = o.period if o.period is not None else system.step_size
+            if any(s.startswith("gnss.") for s in o.measurements.values()) and abs(own - period) > 1e-9 * period:
+                raise UserError(f"{system.source or system.name}: Observer {o.name!r} samples every {own:g} s but "
+                                f"the GNSS fixes come every {period:g} s: set {o.name}.samplePeriod={period:g} too")
+        return roles
+
     def metrics(self, run: RunData) -> dict:
         sig, est, roles = run.signals, run.estimates, run.roles
         t = np.asarray(est["time"])
