@@ -76,6 +76,7 @@ PAPER = {
     "r0_bounds": "0.0072-0.00738 N/kg besides outliers (Fig. 4; VIRM-VI, manufacturer value near the upper bound)",
     "above_140": 0.12, "coast_min": (2.5, 10.0), "brake_cv": 0.20, "coast_cv": 0.30,
     "shares": {"traction": 0.164, "cruising": 0.17, "coasting": 0.57, "braking": 0.093},
+    "linear_share_max": 0.11, "quadratic_share_max": 0.76,
 }
 
 
@@ -95,6 +96,15 @@ def resistance_rel_error(r_hat: np.ndarray, r_true: np.ndarray, grid: np.ndarray
     """rms over ``grid`` (m/s) of (r^(v) - r(v)) / r(v)."""
     e = (resistance(r_hat, grid) - resistance(r_true, grid)) / resistance(r_true, grid)
     return float(np.sqrt(np.mean(e * e)))
+
+
+def term_shares(est: dict, name: str, rows: np.ndarray) -> dict[str, float]:
+    """The largest shares of the linear and quadratic terms in r(v) along the run (Fig. 5 of
+    Cunillera et al. (2022): up to 11 % and 76 %), with the estimator's running r0-r2 and v."""
+    v = np.maximum(np.asarray(est[f"{name}.v"])[rows], 0.0)
+    r0, r1, r2 = (np.asarray(est[f"{name}.r{k}"])[rows] for k in range(3))
+    total = r0 + r1 * v + r2 * v * v
+    return {"linear_share_max": float(np.max(r1 * v / total)), "quadratic_share_max": float(np.max(r2 * v * v / total))}
 
 
 def blocks(regime: np.ndarray) -> list[tuple[int, int, int]]:
@@ -131,7 +141,7 @@ class TrainResistance(Study):
     roles = ROLES
     figures_of_signals = PLOTS
     summary_metrics = ("*.speed_rmse_kmh", "*.position_rmse_m", "*.resistance_rel_error", "*.r?_rel_error",
-                       "*.seconds", "*regime_accuracy", "*max_power_rel_error", "*max_effort_rel_error",
+                       "*.seconds", "*_share_max", "*regime_accuracy", "*max_power_rel_error", "*max_effort_rel_error",
                        "*cruise_speed_error_kmh", "*brake_rate_error*", "truth.cruise_target_kmh",
                        "truth.final_coast_min", "truth.final_brake_s", "truth.share_*", "wall_time_s")
 
@@ -166,6 +176,7 @@ class TrainResistance(Study):
                 "resistance_rel_error": resistance_rel_error(r_hat, r_true),
                 **{f"r{i}_rel_error": float((r_hat[i] - r_true[i]) / r_true[i]) for i in range(3)},
                 **{f"r{i}_final": float(r_hat[i]) for i in range(3)},
+                **term_shares(est, name, fixes),
                 "seconds": float(run.base["observers"].get(name, {}).get("wall_time_s", float("nan"))),
             }
         out["truth"] = self._truth(run, r_true)
@@ -230,7 +241,13 @@ class TrainResistance(Study):
             L.append(f"| {regime} [% of the run time] | {100 * tr[f'share_{regime}']:.1f} | {100 * share:.1f} |")
         L += [f"| cruise target [km/h] | {tr['cruise_target_kmh']:.1f} | - |",
               f"| final coast [min] | {tr['final_coast_min']:.2f} | 2.5-10 over its 67 runs (Fig. 7) |",
-              f"| final brake [s] | {tr['final_brake_s']:.0f} | - |", "", observers_md(metrics)]
+              f"| final brake [s] | {tr['final_brake_s']:.0f} | - |"]
+        for n in names:
+            L += [f"| largest share of r1 v in r(v), {n} [%] | {100 * metrics[n]['linear_share_max']:.0f} | "
+                  f"{100 * PAPER['linear_share_max']:.0f} (Fig. 5) |",
+                  f"| largest share of r2 v^2 in r(v), {n} [%] | {100 * metrics[n]['quadratic_share_max']:.0f} | "
+                  f"{100 * PAPER['quadratic_share_max']:.0f} (Fig. 5) |"]
+        L += ["", observers_md(metrics)]
         return "\n".join(L)
 
     def table_md(self, table: dict[str, dict]) -> str:
@@ -255,6 +272,10 @@ class TrainResistance(Study):
                 L.append(f"| {variant} | {name}: final r0, min-max [N/kg] | "
                          f"{_pct(s, f'{name}.r0_final')} (true median {stat('truth.r0', fmt='.5f')}) | "
                          f"{PAPER['r0_bounds']} |")
+                for term, what in (("linear", "r1 v"), ("quadratic", "r2 v^2")):
+                    L.append(f"| {variant} | {name}: largest share of {what} in r(v), median | "
+                             f"{stat(f'{name}.{term}_share_max', scale=100, fmt='.0f')} % | "
+                             f"{100 * PAPER[f'{term}_share_max']:.0f} % (Fig. 5) |")
             L += [f"| {variant} | runs cruising above 140 km/h | {stat('truth.cruise_above_140', 'mean', 100, '.0f')} % | "
                   f"{100 * PAPER['above_140']:.0f} % |",
                   f"| {variant} | final coast [min], min-max | {stat('truth.final_coast_min', 'min', fmt='.1f')}-"
