@@ -12,6 +12,7 @@ def all_models() -> list[Model]:
     from .coach_vertical import COACH_VERTICAL
     from .driver import DRIVER
     from .gnss import GNSS_RECEIVER
+    from .imu_errors import IMU_ERRORS
     from .sensors import SENSORS
     from .signal_table import SIGNAL_TABLE
     from .step_source import STEP_SOURCE
@@ -21,7 +22,7 @@ def all_models() -> list[Model]:
     from .wheelset import WHEELSET
 
     return [TRACK, WHEELSET, COACH_VERTICAL, STEP_SOURCE, SENSORS, VEHICLE_LATERAL, SIGNAL_TABLE,
-            TRAIN_LONGITUDINAL, GNSS_RECEIVER, DRIVER]
+            TRAIN_LONGITUDINAL, GNSS_RECEIVER, DRIVER, IMU_ERRORS]
 
 
 __all__ = ["Input", "Model", "Output", "Parameter", "State", "Variable", "all_models"]

@@ -20,11 +20,13 @@ mode name             regime  command / leaves when
                               leaves at v >= v_c - 1 km/h where limit >= v_c
 2    hold             2       clip((v* - v) / 1 km/h, 0, 1): cruising by holding the speed
 3    cycle traction   1       f until v >= v* + 2 km/h                 (traction/coast cycles)
-4    cycle coast      3       0 until v <= v* - 3 km/h
+4    cycle coast      3       0 until v <= v* - 5 km/h
 5    coast            3       0, from the coasting point s >= s_c on
 6    brake for limit  4       -min(b(v) max(rho_lim, 1), b_max) / b_max while rho_lim >= 0.1
 7    brake to stop    4       -min(b(v) max(rho_lim, rho_stop), b_max) / b_max until v = 0
-8    stopped          0       -b_5 / b_max (held); the FMU ends the simulation
+8    stopped          0       -b_5 / b_max (held); the FMU ends the simulation ``dwell_time``
+                              after the stop (the train stands at the platform: the final
+                              brake is followed by a standstill, as a measured run's last fixes)
 ==== ================ ======= ================================================================
 
 Braking follows the ATB-EG speed steps (> 130, 130-80, 80-60, 60-40, < 40 km/h) with the
@@ -70,6 +72,10 @@ REGIME = (0, 1, 2, 1, 3, 3, 4, 4, 0)
 REGIME_NAMES = {0: "standstill", 1: "traction", 2: "cruising", 3: "coasting", 4: "braking"}
 KMH = 1.0 / 3.6
 ANTICIPATION = 2.0  # s: a limit is reached this long before its start (driver's and master's delay)
+# traction/coast cycles between v* - 5 and v* + 2 km/h: phases of 20-30 s at 140 km/h, so that a
+# 10 s GNSS interval usually holds one regime (this project's choice; the paper gives no band)
+CYCLE_BAND_LOW = 5.0 * KMH
+DWELL_TOLERANCE = 1e-6  # s: the dwell has elapsed at this point whatever the master's clock arithmetic
 STEP_LOW = (130.0 * KMH, 80.0 * KMH, 60.0 * KMH, 40.0 * KMH, 0.0)
 GAMMA = 0x9E3779B97F4A7C15
 _M64 = (1 << 64) - 1
@@ -91,6 +97,8 @@ def build() -> Model:
         Parameter("seed", "Seed of the driving style", start=1, type="Integer", source="experiment (.ssv)"),
         Parameter("max_deceleration", "The train's b_max (command -1)", "m/s2", MAX_DECELERATION,
                   source="TrainLongitudinal.max_deceleration", positive=True),
+        Parameter("dwell_time", "Time the train stands at the stop before the run ends", "s", 30.0,
+                  source="this project's choice (a measured run's fixes go on at the platform)", min=0.0),
         Parameter("line_file", "Line profile CSV (as TrainLongitudinal's): an absolute path or "
                   "relative to resources/ (line.csv is shipped)", start="line.csv", type="String",
                   source="models/line_profile.py"),
@@ -111,6 +119,7 @@ def build() -> Model:
         *[Output(f"brake_rate_{k}", f"Style: brake rate in ATB-EG speed step {k} ({band} km/h)", "m/s2")
           for k, band in enumerate(("> 130", "130-80", "80-60", "60-40", "< 40"), 1)],
         Output("stop_position", "Stopping point L: the line profile's last position", "m"),
+        Output("stop_time", "Communication point at which the train stopped (memory; 0 before)", "s"),
     ]
     return Model(
         identifier="Driver",
@@ -153,6 +162,7 @@ class DriverTwin:
         }
         self.rates = [self.style[f"brake_rate_{k}"] for k in range(1, 6)]
         self.mode, self.mode_before, self.decision_time = WAIT, WAIT, 0.0
+        self.stop_time = 0.0
         self.terminated = False
 
     def brake_rate_at(self, v: float) -> float:
@@ -224,7 +234,7 @@ class DriverTwin:
         if before == CYCLE_COAST:
             if past:
                 return COAST
-            return CYCLE_TRACTION if v <= target - 3.0 * KMH else CYCLE_COAST
+            return CYCLE_TRACTION if v <= target - CYCLE_BAND_LOW else CYCLE_COAST
         return COAST
 
     def command(self, mode: int, s: float, v: float, limit: float) -> float:
@@ -257,6 +267,8 @@ class DriverTwin:
             self.mode_before, self.decision_time = self.mode, t
         mode = self.decide(self.mode_before, s, v, limit)
         self.mode = mode
-        self.terminated = mode == STOPPED
+        if mode == STOPPED and self.mode_before != STOPPED:
+            self.stop_time = t
+        self.terminated = mode == STOPPED and t - self.stop_time >= self.p["dwell_time"] - DWELL_TOLERANCE
         return {"command": self.command(mode, s, v, limit), "regime": REGIME[mode], "mode": mode,
-                "mode_before": self.mode_before, **self.style}
+                "mode_before": self.mode_before, "stop_time": self.stop_time, **self.style}

@@ -22,7 +22,7 @@ from models.train_longitudinal import Train
 STOP_TOLERANCE_M = 5.0
 OVERSPEED_KMH = 1.5
 RECORD = ["train.s", "train.v", "train.speed_limit", "driver.command", "driver.regime", "driver.mode",
-          "driver.coasting_point", "driver.cycles", "gnss.valid", "gnss.position", "gnss.speed_kmh"]
+          "driver.stop_time", "driver.coasting_point", "driver.cycles", "gnss.valid", "gnss.position", "gnss.speed_kmh"]
 
 
 def train_system(fmu_dir, seed: int) -> System:
@@ -73,7 +73,12 @@ def test_the_run_completes_and_equals_the_twins(fmu_dir, seed):
     regime = col["driver.regime"].astype(int)
     before = s < col["driver.coasting_point"][0]
     assert regime[0] == 1 and set(regime[before]) <= {1, 2, 3}
-    assert set(regime[~before][:-1]) <= {3, 4} and regime[-1] == 0
+    tail = regime[~before]
+    standing = len(tail) - len(np.trim_zeros(tail, "b"))
+    assert set(tail[:-standing]) <= {3, 4} and standing >= 30  # then 30 s (dwell_time) at the platform
+    # the FMU ends the run (fmi2Discard + terminated) on the step that reaches stop + dwell: the
+    # last complete row is the point before it
+    assert col["time"][-1] - col["driver.stop_time"][-1] == 29.0
     seq = [r for k, r in enumerate(regime) if k == 0 or r != regime[k - 1]]
     assert seq[-3:] == [3, 4, 0]
     assert (2 in seq) != bool(col["driver.cycles"][0])  # holding gives cruising, cycles don't
@@ -87,7 +92,9 @@ def test_the_run_completes_and_equals_the_twins(fmu_dir, seed):
     # decides on those, one step ahead of the command the train got, so modes are not compared)
     tw = twin_run(seed)
     n = len(t) - 1
-    assert len(tw) == len(t) + 1
+    # the twin decides on the previous step's outputs: it stops one step later and ends the run
+    # on its own stop + dwell, where the FMU's run ended on the step reaching it (one row less)
+    assert len(tw) == len(t) + 2
     assert np.array_equal(tw[:n, 1], s[:n]) and np.array_equal(tw[:n, 2], v[:n])
 
 

@@ -18,6 +18,8 @@ static const int REGIME[] = {0, 1, 2, 1, 3, 3, 4, 4, 0};
 
 #define KMH (1.0 / 3.6)
 #define ANTICIPATION 2.0 /* s */
+#define CYCLE_BAND_LOW (5.0 * KMH)
+#define DWELL_TOLERANCE 1e-6 /* s */
 static const uint64_t GAMMA = UINT64_C(0x9E3779B97F4A7C15);
 
 static uint64_t mix64(uint64_t z) {
@@ -121,7 +123,7 @@ static int decide(ModelInstance *m, int before, double s, double v, double limit
         return v >= target + 2.0 * KMH ? CYCLE_COAST : CYCLE_TRACTION;
     case CYCLE_COAST:
         if (past_coast) return COAST;
-        return v <= target - 3.0 * KMH ? CYCLE_TRACTION : CYCLE_COAST;
+        return v <= target - CYCLE_BAND_LOW ? CYCLE_TRACTION : CYCLE_COAST;
     default:
         return COAST;
     }
@@ -194,9 +196,10 @@ int model_outputs(ModelInstance *m) {
     m->i[VRI_mode] = mode;
     m->i[VRI_regime] = REGIME[mode];
     r[VR_command] = command(m, mode, s, v, limit);
-    if (mode == STOPPED)
-        model_terminate(m, r[0], "Driver: stopped at s = %.3f m (stopping point %.3f m)", s,
-                        r[VR_stop_position]);
+    if (mode == STOPPED && m->i[VRI_mode_before] != STOPPED) r[VR_stop_time] = r[0];
+    if (mode == STOPPED && r[0] - r[VR_stop_time] >= r[VR_dwell_time] - DWELL_TOLERANCE)
+        model_terminate(m, r[0], "Driver: stopped at s = %.3f m (stopping point %.3f m) at t = %.3f s",
+                        s, r[VR_stop_position], r[VR_stop_time]);
     return 0;
 }
 
