@@ -98,6 +98,49 @@ def resistance_rel_error(r_hat: np.ndarray, r_true: np.ndarray, grid: np.ndarray
     return float(np.sqrt(np.mean(e * e)))
 
 
+def mass_effective(roles: dict) -> float:
+    """gamma (m_tare + m_load), kg: the train's parameters as the run has them."""
+    return float(roles["gamma"]) * (float(roles["tare_mass"]) + float(roles["load_mass"]))
+
+
+def regime_scores(run: RunData, name: str, fixes: np.ndarray) -> tuple[dict, dict]:
+    """One estimator's driving regimes and features (Cunillera et al. (2022) §3.2-3.3, by
+    :func:`estimators.driving_regimes.score`) at the GNSS fix rows ``fixes``: the issue's
+    ``regime_accuracy``, ``max_power_rel_error``, ``max_effort_rel_error``,
+    ``cruise_speed_error_kmh``, ``brake_rate_error`` (five, per ATB-EG step, None where the
+    run has no braking fix there; also as ``brake_rate_error_step`` by step for the study's
+    summary), the recognised regimes' ``regime_share`` of the running time and the
+    ``features``; and the features' dict with its samples (the figures')."""
+    from estimators.driving_regimes import REGIME_NAMES, score
+
+    sig, est, roles = run.signals, run.estimates, run.roles
+    t = np.asarray(est["time"])[fixes]
+    style = {k: float(sig[roles[k]][0]) for k in ("cruise_target", "traction_fraction",
+                                                  *(f"brake_rate_{j}" for j in range(1, 6)))}
+    train = {k: float(roles[k]) for k in ("max_power", "max_traction_force", "tare_mass", "load_mass")}
+    train["rotating_mass_factor"] = float(roles["gamma"])
+    m, feats = score(t, np.asarray(est[f"{name}.v"])[fixes], np.asarray(est[f"{name}.acceleration"])[fixes],
+                     np.asarray(est[f"{name}.effort"])[fixes], sig["time"], sig[roles["v"]], sig[roles["effort"]],
+                     style, train)
+    m = {k: _finite(x) if isinstance(x, float) else x for k, x in m.items()}
+    rec = np.asarray(feats["regimes"])
+    dt = np.r_[0.0, np.diff(t)]  # a fix stands for the interval before it
+    running = float(dt[rec != 0].sum()) or 1.0
+    return {**m, "brake_rate_error_step": {str(k + 1): e for k, e in enumerate(m["brake_rate_error"]) if e is not None},
+            "regime_share": {REGIME_NAMES[c]: float(dt[rec == c].sum() / running) for c in (1, 2, 3, 4)},
+            "features": {"max_power_w": _finite(feats["max_power"]), "max_effort_n": _finite(feats["max_effort"]),
+                         "cruise_speed_kmh": _finite(feats["cruise_speed"] / KMH),
+                         "cruise_above_140": float(feats["cruise_speed"] / KMH > 140.0),
+                         "final_coast_min": _finite(feats["final_coast_duration"] / 60.0),
+                         "final_brake_s": _finite(feats["final_brake_duration"]),
+                         "brake_rates": [_finite(x) for x in feats["brake_rates"]]}}, feats
+
+
+def _finite(x) -> float | None:
+    """None where a feature is undefined (NaN), as JSON has no NaN."""
+    return float(x) if x is not None and np.isfinite(x) else None
+
+
 def term_shares(est: dict, name: str, rows: np.ndarray) -> dict[str, float]:
     """The largest shares of the linear and quadratic terms in r(v) along the run (Fig. 5 of
     Cunillera et al. (2022): up to 11 % and 76 %), with the estimator's running r0-r2 and v."""
@@ -142,7 +185,8 @@ class TrainResistance(Study):
     figures_of_signals = PLOTS
     summary_metrics = ("*.speed_rmse_kmh", "*.position_rmse_m", "*.resistance_rel_error", "*.r?_rel_error",
                        "*.seconds", "*_share_max", "*regime_accuracy", "*max_power_rel_error", "*max_effort_rel_error",
-                       "*cruise_speed_error_kmh", "*brake_rate_error*", "truth.cruise_target_kmh",
+                       "*cruise_speed_error_kmh", "*brake_rate_error*", "*.features.max_power_w",
+                       "*.features.cruise_speed_kmh", "*.features.final_*", "truth.cruise_target_kmh",
                        "truth.final_coast_min", "truth.final_brake_s", "truth.share_*", "wall_time_s")
 
     # ---- per run -----------------------------------------------------------------------------
@@ -162,7 +206,8 @@ class TrainResistance(Study):
         sig, est, roles = run.signals, run.estimates, run.roles
         t = np.asarray(est["time"])
         n = len(t)
-        fixes = np.flatnonzero(np.asarray(sig[roles["fix"]])[:n] != 0)[1:]  # the first is the initial state
+        fixes_all = np.flatnonzero(np.asarray(sig[roles["fix"]])[:n] != 0)
+        fixes = fixes_all[1:]  # the first is the initial state
         last = n - 1
         r_true = np.array([float(sig[roles[k]][last]) for k in ("r0", "r1", "r2")])
         out: dict = {}
@@ -179,46 +224,59 @@ class TrainResistance(Study):
                 **term_shares(est, name, fixes),
                 "seconds": float(run.base["observers"].get(name, {}).get("wall_time_s", float("nan"))),
             }
+            if f"{name}.acceleration" in est and f"{name}.effort" in est and len(fixes_all) >= 2:
+                out[name].update(regime_scores(run, name, fixes_all)[0])
         out["truth"] = self._truth(run, r_true)
         return out
 
     @staticmethod
     def _truth(run: RunData, r_true: np.ndarray) -> dict:
+        """The run's true resistance, the driver's style and, by the paper's definitions on the
+        driver's exact steps (:func:`estimators.driving_regimes.reference_features`), the shares
+        of the regimes in the running time (standstill left out), the final coast and brake
+        durations and the applied brake rate per ATB-EG step."""
+        from estimators.driving_regimes import reference_features, true_regimes
+
         sig, roles = run.signals, run.roles
-        t = np.asarray(sig["time"])
-        regime = np.asarray(sig[roles["regime"]]).astype(int)
+        t, v, f = (np.asarray(sig[k]) for k in ("time", roles["v"], roles["effort"]))
+        regime = true_regimes(t, v, f)
         dt = np.r_[np.diff(t), 0.0]
-        moving_time = float(t[-1] - t[0])
-        coast, brake = final_coast_and_brake(t, regime)
+        running = float(dt[regime != 0].sum())
+        ref = reference_features(t, v, f, mass_effective(roles))
         vc = float(sig[roles["cruise_target"]][0])
         return {
             **{f"r{i}": float(r_true[i]) for i in range(3)},
-            "run_time_s": moving_time, "max_power_w": float(roles["max_power"]), "top_speed_kmh": float(np.max(sig[roles["v"]]) / KMH),
+            "run_time_s": float(t[-1] - t[0]), "running_time_s": running, "max_power_w": float(roles["max_power"]),
+            "top_speed_kmh": float(np.max(v) / KMH),
             "cruise_target_kmh": vc / KMH, "cruise_above_140": float(vc / KMH > 140.0),
             "cycles": float(sig[roles["cycles"]][0]), "traction_fraction": float(sig[roles["traction_fraction"]][0]),
             **{f"brake_rate_{k}": float(sig[roles[f"brake_rate_{k}"]][0]) for k in range(1, 6)},
-            "final_coast_min": coast / 60.0, "final_brake_s": brake,
-            **{f"share_{REGIMES[c]}": float(dt[regime == c].sum() / moving_time) for c in (1, 2, 3, 4)},
+            **{f"applied_brake_rate_{k}": _finite(ref["brake_rates"][k - 1]) for k in range(1, 6)},
+            "final_coast_min": _finite(ref["final_coast_duration"] / 60.0),
+            "final_brake_s": _finite(ref["final_brake_duration"]),
+            **{f"share_{REGIMES[c]}": float(dt[regime == c].sum() / running) for c in (1, 2, 3, 4)},
         }
 
     def series(self, run: RunData) -> dict[str, np.ndarray]:
-        """What a Monte Carlo member brings back for the study's figures, at its GNSS fixes
-        (float32): position, the GNSS speed, and per estimator the applied power it computed
-        (effort x estimated speed x gamma m, W) in the initial traction (Fig. 9: the driver's
-        traction regime before its first non-traction one); the true power there too."""
+        """What a Monte Carlo member brings back for the study's figures (float32): at its GNSS
+        fixes the position and GNSS speed (Fig. 2); per estimator the traction power samples
+        of the initial acceleration (mid speed in km/h, power in W; Fig. 9) and the braking
+        samples (mid speed, deceleration, ATB-EG step; Fig. 8) of its recognised regimes."""
         sig, est, roles = run.signals, run.estimates, run.roles
         n = len(est["time"])
         fixes = np.flatnonzero(np.asarray(sig[roles["fix"]])[:n] != 0)
-        regime = np.asarray(sig[roles["regime"]]).astype(int)
-        first_other = next((k for k in range(len(regime)) if regime[k] != 1), len(regime))
-        m_eff = float(roles["gamma"]) * (float(roles["tare_mass"]) + float(roles["load_mass"]))
-        initial = fixes[fixes < first_other]
-        out = {"position": sig[roles["gnss_position"]][fixes], "speed_kmh": sig[roles["gnss_speed"]][fixes] / KMH,
-               "traction_speed_kmh": sig[roles["v"]][initial] / KMH, "traction_power_true": sig[roles["power"]][initial]}
+        out = {"position": sig[roles["gnss_position"]][fixes], "speed_kmh": sig[roles["gnss_speed"]][fixes] / KMH}
+        m_eff = mass_effective(roles)
         for name in estimators_of(est):
-            out[f"{name}.traction_speed_kmh"] = est[f"{name}.v"][initial] / KMH
-            out[f"{name}.traction_power"] = m_eff * est[f"{name}.effort"][initial] * est[f"{name}.v"][initial] \
-                if f"{name}.effort" in est else np.full(len(initial), np.nan)
+            if f"{name}.acceleration" not in est or len(fixes) < 2:
+                continue
+            feats = regime_scores(run, name, fixes)[1]
+            p, b = feats["power_samples"], feats["brake_samples"]
+            out[f"{name}.power_speed_kmh"] = p["speed"][p["initial"]] / KMH
+            out[f"{name}.power_w"] = p["power"][p["initial"]] * m_eff
+            out[f"{name}.brake_speed_kmh"] = b["speed"] / KMH
+            out[f"{name}.brake_deceleration"] = b["deceleration"]
+            out[f"{name}.brake_step"] = b["step"]
         return {k: np.asarray(v, dtype=np.float32) for k, v in out.items()}
 
     def figures(self, run: RunData, out: Path) -> list[str]:
@@ -234,20 +292,37 @@ class TrainResistance(Study):
         L += [f"| {n} | {_row(metrics[n])} |" for n in names]
         tr = metrics["truth"]
         L += ["", f"True at the end: r0 = {tr['r0']:.5g} N/kg, r1 = {tr['r1']:.4g} N/(kg m/s), "
-              f"r2 = {tr['r2']:.4g} N/(kg (m/s)^2).", "",
-              "## The run (driver's truth) beside the paper's Fig. 3 run", "",
-              "| | this run | Cunillera et al. (2022), Fig. 3 |", "|---|---|---|"]
+              f"r2 = {tr['r2']:.4g} N/(kg (m/s)^2).", ""]
+        scored = [n for n in names if "regime_accuracy" in metrics[n]]
+        if scored:
+            L += ["## Driving regimes and features (§3.2-3.3)", "",
+                  "| estimator | regime accuracy | max. power rel. error | max. effort rel. error | "
+                  "cruise speed error [km/h] | brake rate error per ATB-EG step [m/s2] |", "|---|---|---|---|---|---|"]
+            L += [f"| {n} | {_f(metrics[n]['regime_accuracy'], '.3f')} | {_f(metrics[n]['max_power_rel_error'], '.4f')} | "
+                  f"{_f(metrics[n]['max_effort_rel_error'], '.4f')} | {_f(metrics[n]['cruise_speed_error_kmh'], '.2f')} | "
+                  f"{', '.join(_f(e, '+.3f') for e in metrics[n]['brake_rate_error'])} |" for n in scored]
+            L.append("")
+        head = " | ".join(f"{n} (recognised)" for n in scored)
+        L += ["## The run beside the paper's Fig. 3 run", "",
+              f"| | truth | {head + ' | ' if head else ''}Cunillera et al. (2022) |",
+              "|---|---|" + "---|" * len(scored) + "---|"]
         for regime, share in PAPER["shares"].items():
-            L.append(f"| {regime} [% of the run time] | {100 * tr[f'share_{regime}']:.1f} | {100 * share:.1f} |")
-        L += [f"| cruise target [km/h] | {tr['cruise_target_kmh']:.1f} | - |",
-              f"| final coast [min] | {tr['final_coast_min']:.2f} | 2.5-10 over its 67 runs (Fig. 7) |",
-              f"| final brake [s] | {tr['final_brake_s']:.0f} | - |"]
-        for n in names:
-            L += [f"| largest share of r1 v in r(v), {n} [%] | {100 * metrics[n]['linear_share_max']:.0f} | "
-                  f"{100 * PAPER['linear_share_max']:.0f} (Fig. 5) |",
-                  f"| largest share of r2 v^2 in r(v), {n} [%] | {100 * metrics[n]['quadratic_share_max']:.0f} | "
-                  f"{100 * PAPER['quadratic_share_max']:.0f} (Fig. 5) |"]
-        L += ["", observers_md(metrics)]
+            rec = "".join(f"{100 * metrics[n]['regime_share'][regime]:.1f} | " for n in scored)
+            L.append(f"| {regime} [% of the running time] | {100 * tr[f'share_{regime}']:.1f} | {rec}{100 * share:.1f} |")
+        feats = [metrics[n]["features"] for n in scored]
+        L += [f"| cruise speed [km/h] | {tr['cruise_target_kmh']:.1f} (target) | "
+              + "".join(f"{_f(f['cruise_speed_kmh'], '.1f')} | " for f in feats) + "- |",
+              f"| final coast [min] | {_f(tr['final_coast_min'], '.2f')} | "
+              + "".join(f"{_f(f['final_coast_min'], '.2f')} | " for f in feats) + "2.5-10 over its 67 runs (Fig. 7) |",
+              f"| final brake [s] | {_f(tr['final_brake_s'], '.0f')} | "
+              + "".join(f"{_f(f['final_brake_s'], '.0f')} | " for f in feats) + "- |"]
+        for term, what in (("linear", "r1 v"), ("quadratic", "r2 v^2")):
+            L.append(f"| largest share of {what} in r(v) [%] | - | "
+                     + "".join(f"{100 * metrics[n][f'{term}_share_max']:.0f} | " for n in scored)
+                     + f"{100 * PAPER[f'{term}_share_max']:.0f} (Fig. 5) |")
+        L += ["", "Truth: the paper's regime definitions on the driver's exact 1 s steps "
+              "(estimators.driving_regimes.reference_features); the cruise speed is the driver's target.",
+              "", observers_md(metrics)]
         return "\n".join(L)
 
     def table_md(self, table: dict[str, dict]) -> str:
@@ -260,33 +335,50 @@ class TrainResistance(Study):
 
     def summary_md(self, summary: dict[str, dict[str, dict]], runs: int) -> str:
         L = [super().summary_md(summary, runs), "", "## Beside Cunillera et al. (2022) (67 NS runs, VIRM-VI)", "",
-             "| variant | quantity | this study (driver's truth / estimates) | Cunillera et al. (2022) |",
-             "|---|---|---|---|"]
+             "| variant | quantity | truth | " + "estimators (recognised regimes and features) | "
+             "Cunillera et al. (2022) |", "|---|---|---|---|---|"]
         for variant, s in summary.items():
             def stat(key, k="p50", scale=1.0, fmt=".3g"):
                 return format(s[key][k] * scale, fmt) if key in s else "-"
 
             def cv(key):
                 return f"{s[key]['std'] / s[key]['mean']:.2f}" if key in s and s[key]["mean"] else "-"
-            for name in sorted({k.split(".")[0] for k in s if k.endswith(".r0_final")}):
-                L.append(f"| {variant} | {name}: final r0, min-max [N/kg] | "
-                         f"{_pct(s, f'{name}.r0_final')} (true median {stat('truth.r0', fmt='.5f')}) | "
-                         f"{PAPER['r0_bounds']} |")
-                for term, what in (("linear", "r1 v"), ("quadratic", "r2 v^2")):
-                    L.append(f"| {variant} | {name}: largest share of {what} in r(v), median | "
-                             f"{stat(f'{name}.{term}_share_max', scale=100, fmt='.0f')} % | "
-                             f"{100 * PAPER[f'{term}_share_max']:.0f} % (Fig. 5) |")
-            L += [f"| {variant} | runs cruising above 140 km/h | {stat('truth.cruise_above_140', 'mean', 100, '.0f')} % | "
-                  f"{100 * PAPER['above_140']:.0f} % |",
-                  f"| {variant} | final coast [min], min-max | {stat('truth.final_coast_min', 'min', fmt='.1f')}-"
-                  f"{stat('truth.final_coast_min', 'max', fmt='.1f')} | {PAPER['coast_min'][0]}-{PAPER['coast_min'][1]} |",
-                  f"| {variant} | CV of the final brake time | {cv('truth.final_brake_s')} | {PAPER['brake_cv']:.2f} |",
-                  f"| {variant} | CV of the final coast time | {cv('truth.final_coast_min')} | {PAPER['coast_cv']:.2f} |"]
+
+            names = sorted({k.split(".")[0] for k in s if k.endswith(".r0_final")})
+
+            def each(fn):
+                return "; ".join(f"{n}: {fn(n)}" for n in names) or "-"
+            rows = [
+                ("final r0, min-max [N/kg]", f"median {stat('truth.r0', fmt='.5f')}",
+                 each(lambda n: _pct(s, f"{n}.r0_final")), PAPER["r0_bounds"]),
+                ("largest share of r1 v in r(v), median", "-", each(lambda n: stat(f"{n}.linear_share_max", scale=100,
+                                                                                   fmt=".0f") + " %"),
+                 f"{100 * PAPER['linear_share_max']:.0f} % (Fig. 5)"),
+                ("largest share of r2 v^2 in r(v), median", "-",
+                 each(lambda n: stat(f"{n}.quadratic_share_max", scale=100, fmt=".0f") + " %"),
+                 f"{100 * PAPER['quadratic_share_max']:.0f} % (Fig. 5)"),
+                ("runs cruising above 140 km/h", f"{stat('truth.cruise_above_140', 'mean', 100, '.0f')} %",
+                 each(lambda n: stat(f"{n}.features.cruise_above_140", "mean", 100, ".0f") + " %"),
+                 f"{100 * PAPER['above_140']:.0f} %"),
+                ("final coast [min], min-max",
+                 f"{stat('truth.final_coast_min', 'min', fmt='.1f')}-{stat('truth.final_coast_min', 'max', fmt='.1f')}",
+                 each(lambda n: f"{stat(f'{n}.features.final_coast_min', 'min', fmt='.1f')}-"
+                                f"{stat(f'{n}.features.final_coast_min', 'max', fmt='.1f')}"),
+                 f"{PAPER['coast_min'][0]}-{PAPER['coast_min'][1]}"),
+                ("CV of the final brake time", cv("truth.final_brake_s"),
+                 each(lambda n: cv(f"{n}.features.final_brake_s")), f"{PAPER['brake_cv']:.2f}"),
+                ("CV of the final coast time", cv("truth.final_coast_min"),
+                 each(lambda n: cv(f"{n}.features.final_coast_min")), f"{PAPER['coast_cv']:.2f}"),
+            ]
             for regime, share in PAPER["shares"].items():
-                L.append(f"| {variant} | {regime} share of the run time, median | "
-                         f"{stat(f'truth.share_{regime}', scale=100, fmt='.1f')} % | {100 * share:.1f} % (its Fig. 3 run) |")
+                rows.append((f"{regime} share of the running time, median",
+                             f"{stat(f'truth.share_{regime}', scale=100, fmt='.1f')} %",
+                             each(lambda n: stat(f"{n}.regime_share.{regime}", scale=100, fmt=".1f") + " %"),
+                             f"{100 * share:.1f} % (its Fig. 3 run)"))
+            L += [f"| {variant} | {q} | {t} | {e} | {p} |" for q, t, e, p in rows]
         L += ["", "The paper's resistance is that of a VIRM-VI; ours is the published KISS Davis law (the "
-              "estimators start from it), so compare spreads, not values."]
+              "estimators start from it), so compare spreads, not values. Truth: the driver's style and the "
+              "paper's regime definitions on its exact 1 s steps."]
         return "\n".join(L)
 
     def study_figures(self, table: dict, series: dict, out: Path) -> list[str]:
@@ -299,6 +391,10 @@ def _pct(s: dict, key: str) -> str:
     if key not in s:
         return "-"
     return f"{s[key]['min']:.5f}-{s[key]['max']:.5f} (p50 {s[key]['p50']:.5f}, p95 {s[key]['p95']:.5f})"
+
+
+def _f(x, fmt: str) -> str:
+    return "-" if x is None else format(x, fmt)
 
 
 def _row(e: dict) -> str:

@@ -86,19 +86,29 @@ def run_figures(run, out: Path) -> list[str]:
         ax.set_title(f"Running resistance terms ({name}) and the line term (Fig. 5 of Cunillera et al. (2022))")
         files.append(_save(fig, out, "fig5_resistance_terms.png"))
 
-    # Fig. 6: regimes along the run (the driver's; recognised ones are added by the recognition)
-    fig, ax = plt.subplots(figsize=(9, 4))
-    regime = np.asarray(sig[roles["regime"]]).astype(int)
-    v = sig[roles["v"]] / KMH
-    for code, label in REGIMES.items():
-        sel = regime == code
-        if sel.any():
-            ax.scatter(t[sel], v[sel], s=3, color=REGIME_COLOURS[code], label=label)
-    ax.set_ylabel("speed [km/h]")
-    ax.set_xlabel("time [s]")
-    ax.legend(fontsize=8, markerscale=3)
-    ax.grid(alpha=0.3)
-    ax.set_title("Driving regimes along the run, the driver's (Fig. 6 of Cunillera et al. (2022))")
+    # Fig. 6: regimes along the run: the truth on the driver's steps, each estimator's recognised ones at its fixes
+    from estimators.driving_regimes import true_regimes
+
+    from . import regime_scores
+
+    panels = [("truth (the paper's definitions on the driver's 1 s steps)", t,
+               true_regimes(t, sig[roles["v"]], sig[roles["effort"]]), sig[roles["v"]] / KMH)]
+    for name in names:
+        if f"{name}.acceleration" in est and len(fx) >= 2:
+            panels.append((f"{name}: recognised at the GNSS fixes", t[fx],
+                           np.asarray(regime_scores(run, name, fx)[1]["regimes"]), est[f"{name}.v"][fx] / KMH))
+    fig, axes = plt.subplots(len(panels), 1, figsize=(9, 2.8 * len(panels)), sharex=True, squeeze=False)
+    for ax, (title, tt, regime, v) in zip(axes[:, 0], panels):
+        for code, label in REGIMES.items():
+            sel = regime == code
+            if sel.any():
+                ax.scatter(tt[sel], v[sel], s=4, color=REGIME_COLOURS[code], label=label)
+        ax.set_ylabel("speed [km/h]")
+        ax.set_title(title, fontsize=9)
+        ax.legend(fontsize=7, markerscale=3, loc="upper right")
+        ax.grid(alpha=0.3)
+    axes[-1, 0].set_xlabel("time [s]")
+    fig.suptitle("Driving regimes along the run (Fig. 6 of Cunillera et al. (2022))", fontsize=10)
     files.append(_save(fig, out, "fig6_regimes.png"))
     return files
 
@@ -141,42 +151,59 @@ def study_figures(table: dict, series: dict, out: Path) -> list[str]:
         fig.suptitle(f"{variant}: final resistance coefficients (Fig. 4 of Cunillera et al. (2022))", fontsize=9)
         files.append(_save(fig, out, f"fig4_resistance_{variant}.png"))
 
-        # Fig. 7: cruise speed, final coast and brake durations (the driver's truth)
+        # Fig. 7: cruise speed, final coast and brake durations: recognised per estimator, and the truth
         fig, ax = plt.subplots(1, 3, figsize=(12, 3.6))
-        for a, key, label in zip(ax, ("cruise_target_kmh", "final_coast_min", "final_brake_s"),
-                                 ("cruise speed [km/h]", "final coast [min]", "final brake [s]")):
-            a.hist([runs[s]["truth"][key] for s in seeds], bins=12, color="C0", alpha=0.7, label="driver (truth)")
+        for a, key, truth_key, label in zip(ax, ("cruise_speed_kmh", "final_coast_min", "final_brake_s"),
+                                            ("cruise_target_kmh", "final_coast_min", "final_brake_s"),
+                                            ("cruise speed [km/h]", "final coast [min]", "final brake [s]")):
+            true = _values([runs[s]["truth"].get(truth_key) for s in seeds])
+            groups = {name: _values([runs[s].get(name, {}).get("features", {}).get(key) for s in seeds])
+                      for name in names}
+            every = np.concatenate([true, *groups.values()]) if len(true) else true
+            bins = np.linspace(every.min(), every.max(), 15) if every.size and np.ptp(every) > 0 else 10
+            a.hist(true, bins=bins, histtype="step", color="k", lw=1.2, label="truth")
+            for (name, vals), c in zip(groups.items(), COLOURS):
+                if vals.size:
+                    a.hist(vals, bins=bins, alpha=0.5, color=c, label=f"{name} (recognised)")
             a.set_xlabel(label)
             a.legend(fontsize=7)
-        fig.suptitle(f"{variant}: driving style (Fig. 7 of Cunillera et al. (2022))", fontsize=9)
+        fig.suptitle(f"{variant}: driving style (Fig. 7 of Cunillera et al. (2022)); truth: the driver's cruise "
+                     "target, the durations on its exact steps", fontsize=9)
         files.append(_save(fig, out, f"fig7_driving_style_{variant}.png"))
 
-        # Fig. 8: brake rate per ATB-EG step
+        # Fig. 8: brake rates per ATB-EG step: each estimator's braking fixes, their mean and std, the
+        # driver's style rates
         fig, ax = plt.subplots(figsize=(8, 3.6))
-        rates = np.array([[runs[s]["truth"][f"brake_rate_{k}"] for k in range(1, 6)] for s in seeds])
-        for j in range(5):
-            ax.plot(np.full(len(seeds), j) + np.linspace(-0.2, 0.2, len(seeds)), rates[:, j], "b.", ms=3)
-        ax.errorbar(range(5), rates.mean(axis=0), yerr=rates.std(axis=0), fmt="rs", capsize=4,
-                    label="mean and std")
+        style = np.array([[runs[s]["truth"][f"brake_rate_{k}"] for k in range(1, 6)] for s in seeds])
+        ax.plot(np.arange(5) + 0.3, style.mean(axis=0), "kx", ms=8, label="driver's style rate (mean)")
+        for name, c in zip(names, COLOURS):
+            d = [ser.get(s, {}) for s in seeds]
+            step = np.concatenate([x.get(f"{name}.brake_step", []) for x in d]).astype(int)
+            dec = np.concatenate([x.get(f"{name}.brake_deceleration", []) for x in d])
+            if not step.size:
+                continue
+            ax.plot(step - 1 + np.random.default_rng(0).uniform(-0.2, 0.2, step.size), dec, ".", color="b", ms=2,
+                    alpha=0.5, label=f"{name}: braking fixes")
+            means = [dec[step == k].mean() if (step == k).any() else np.nan for k in range(1, 6)]
+            stds = [dec[step == k].std() if (step == k).any() else np.nan for k in range(1, 6)]
+            ax.errorbar(range(5), means, yerr=stds, fmt="s", color=c, capsize=4, label=f"{name}: mean and std")
         ax.set_xticks(range(5), [f"{b} km/h" for b in ATB_EG])
-        ax.set_ylabel("brake rate [m/s2]")
-        ax.legend(fontsize=8)
+        ax.set_ylabel("deceleration [m/s2]")
+        ax.legend(fontsize=7)
         ax.grid(alpha=0.3)
-        ax.set_title(f"{variant}: brake rates per ATB-EG step, the driver's (Fig. 8 of Cunillera et al. (2022))",
-                     fontsize=9)
+        ax.set_title(f"{variant}: brake rates per ATB-EG step (Fig. 8 of Cunillera et al. (2022))", fontsize=9)
         files.append(_save(fig, out, f"fig8_brake_rates_{variant}.png"))
 
-        # Fig. 9: traction power vs speed in the initial traction
+        # Fig. 9: traction power vs speed in the initial acceleration, recognised per estimator
         fig, ax = plt.subplots(figsize=(8, 4))
-        for s in seeds:
-            d = ser.get(s, {})
-            if "traction_speed_kmh" in d:
-                ax.plot(d["traction_speed_kmh"], d["traction_power_true"] / 1e3, "k.", ms=2,
-                        label="true" if s == seeds[0] else None)
-            for name, c in zip(names, COLOURS):
-                if f"{name}.traction_power" in d:
-                    ax.plot(d[f"{name}.traction_speed_kmh"], d[f"{name}.traction_power"] / 1e3, ".", color=c, ms=2,
-                            label=name if s == seeds[0] else None)
+        for name, c in zip(names, COLOURS):
+            first = True
+            for s in seeds:
+                d = ser.get(s, {})
+                if f"{name}.power_w" in d:
+                    ax.plot(d[f"{name}.power_speed_kmh"], d[f"{name}.power_w"] / 1e3, ".", color=c, ms=2,
+                            label=name if first else None)
+                    first = False
         ax.axhline(runs[seeds[0]]["truth"]["max_power_w"] / 1e3, color="0.5", ls="--", label="maximum power")
         ax.set_xlabel("speed [km/h]")
         ax.set_ylabel("traction power [kW]")
@@ -186,6 +213,10 @@ def study_figures(table: dict, series: dict, out: Path) -> list[str]:
                      fontsize=9)
         files.append(_save(fig, out, f"fig9_traction_power_{variant}.png"))
     return files
+
+
+def _values(xs) -> np.ndarray:
+    return np.array([x for x in xs if x is not None and np.isfinite(x)], dtype=float)
 
 
 def _flat_names(m: dict, prefix: str = "") -> list[str]:
