@@ -89,13 +89,33 @@ def test_standard_run_end_to_end(standard):
     # values (Table 1 sigmas, Q = 0), so its resistance error is the run's scatter
     assert e["speed_rmse_kmh"] < 1.0 and e["position_rmse_m"] < 8.0
     assert e["resistance_rel_error"] < 0.3 and 0 < e["seconds"] < 5
-    # the driver's truth: shares of the run time add up with standstill
+    # regimes and features: the study's wiring equals estimators.driving_regimes.score on the CSVs
+    from estimators.driving_regimes import score
+
+    every = np.flatnonzero(sig["gnss.valid"] == 1)
+    style = {k: sig[f"driver.{k}"][0] for k in ("cruise_target", "traction_fraction",
+                                                *(f"brake_rate_{j}" for j in range(1, 6)))}
+    train = {"max_power": 2388e3, "max_traction_force": 226e3, "tare_mass": 297e3, "load_mass": 15960.0,
+             "rotating_mass_factor": 1.06}
+    ref, feats = score(sig["time"][every], est["ukf_paper.v"][every], est["ukf_paper.acceleration"][every],
+                       est["ukf_paper.effort"][every], sig["time"], sig["train.v"], sig["train.effort_specific"],
+                       style, train)
+    for k in ("regime_accuracy", "max_power_rel_error", "max_effort_rel_error", "cruise_speed_error_kmh"):
+        assert e[k] == pytest.approx(ref[k], rel=1e-12), k
+    assert [x is None for x in e["brake_rate_error"]] == [x is None for x in ref["brake_rate_error"]]
+    assert [x for x in e["brake_rate_error"] if x is not None] == pytest.approx(
+        [x for x in ref["brake_rate_error"] if x is not None], rel=1e-12)
+    assert e["features"]["cruise_speed_kmh"] == pytest.approx(feats["cruise_speed"] * 3.6, rel=1e-12)
+    # what the paper's UKF gives on this run (a wrong effort or acceleration breaks these)
+    assert e["regime_accuracy"] > 0.75 and e["max_power_rel_error"] < 0.1 and e["cruise_speed_error_kmh"] < 3
+    assert sum(e["regime_share"].values()) == pytest.approx(1.0)
+    # the truth: shares of the running time add up to 1, the durations from the driver's steps
     tr = m["truth"]
     assert 120 <= tr["cruise_target_kmh"] <= 140 and 0 < tr["final_brake_s"] < tr["final_coast_min"] * 60
-    assert sum(tr[f"share_{r}"] for r in ("traction", "cruising", "coasting", "braking")) <= 1.0
+    assert sum(tr[f"share_{r}"] for r in ("traction", "cruising", "coasting", "braking")) == pytest.approx(1.0)
     for f in ("fig3_run.png", "fig5_resistance_terms.png", "fig6_regimes.png", "report.md"):
         assert (out / f).is_file(), f
-    assert "Cunillera et al. (2022), Fig. 3" in (out / "report.md").read_text()
+    assert "The run beside the paper's Fig. 3 run" in (out / "report.md").read_text()
 
 
 def test_variants_set_the_truth_they_name(tmp_path, fmu_dir):
@@ -185,6 +205,13 @@ def test_measured_replay_of_the_shipped_example(replayed, tmp_path):
         assert m["ukf_paper"][f"r{k}_final"] == pytest.approx(sim[f"r{k}_final"], rel=1e-6)
     assert m["ukf_paper"]["speed_residual_kmh"] < 0.1 and m["ukf_paper"]["position_residual_m"] < 10
     assert "speed_rmse_kmh" not in m["ukf_paper"]  # no truth in a measured run
+    # the features of the replay are the simulated run's
+    got, want = m["ukf_paper"]["features"], sim["features"]
+    assert got["final_coast_min"] == want["final_coast_min"] and got["final_brake_s"] == want["final_brake_s"]
+    assert got["cruise_speed_kmh"] == pytest.approx(want["cruise_speed_kmh"], abs=0.05)
+    assert [x is None for x in got["brake_rates"]] == [x is None for x in want["brake_rates"]]
+    assert [x for x in got["brake_rates"] if x] == pytest.approx([x for x in want["brake_rates"] if x], abs=1e-3)
+    assert got["max_power_w_per_kg"] * 1.06 * (297e3 + 15960) == pytest.approx(want["max_power_w"], rel=1e-3)
 
 
 BAD = {  # file text -> the one error line's tail

@@ -11,7 +11,9 @@ No ground truth: ``metrics.json`` holds, per estimator (an object under its name
 ``r0_final``, ``r1_final``, ``r2_final`` (SI: N/kg, N/(kg m/s), N/(kg (m/s)^2)), the rms of
 its speed and position against the measured fixes (``speed_residual_kmh``,
 ``position_residual_m``: how well the model follows the run, not an error) and ``seconds``;
-and the run's ``fixes``, ``run_time_s`` and ``top_speed_kmh``. A run shorter than one GNSS
+``features`` (§3.3 on its recognised regimes, mass-specific: the maximum
+tractive power and effort, cruise speed, final coast and brake durations, brake rate per
+ATB-EG step, regime shares); and the run's ``fixes``, ``run_time_s`` and ``top_speed_kmh``. A run shorter than one GNSS
 sample is a one-line error.
 """
 
@@ -24,13 +26,35 @@ from pathlib import Path
 import numpy as np
 
 from experiments.study_protocol import RunData, Study, measurement, parameter
-from experiments.train_resistance import KMH, estimators_of, resistance
+from experiments.train_resistance import KMH, _f, _finite, estimators_of, resistance
 from fmus.errors import UserError
 
 REFERENCE = "ukf_paper"
 ROLES = {"position": measurement(REFERENCE, "position"), "speed": measurement(REFERENCE, "speed"),
          "file": parameter("replay", "file"), "time_column": parameter("replay", "time_column")}
 PLOTS = {"measured.png": ("The replayed run", [[("position", "position [m]")], [("speed", "speed [km/h]")]])}
+
+
+def features_of(t: np.ndarray, est: dict, name: str) -> dict:
+    """The §3.3 features of one estimator's outputs at the fixes (Cunillera et al. (2022),
+    :func:`estimators.driving_regimes.features` on its recognised regimes); mass-specific (a
+    measured run carries no mass): ``max_power_w_per_kg``, ``max_effort_n_per_kg``, the
+    cruise speed, final coast and brake durations, the brake rate per ATB-EG step and the
+    recognised regimes' shares of the running time. None where a feature is undefined."""
+    from estimators.driving_regimes import REGIME_NAMES, features, recognise
+
+    v, a, f = (np.asarray(est[f"{name}.{k}"]) for k in ("v", "acceleration", "effort"))
+    regimes = recognise(v, a, f)
+    feats = features(t, v, a, f, regimes)
+    dt = np.r_[0.0, np.diff(t)]
+    running = float(dt[regimes != 0].sum()) or 1.0
+    return {"max_power_w_per_kg": _finite(feats["max_power_specific"]),
+            "max_effort_n_per_kg": _finite(feats["max_effort_specific"]),
+            "cruise_speed_kmh": _finite(feats["cruise_speed"] / KMH),
+            "final_coast_min": _finite(feats["final_coast_duration"] / 60.0),
+            "final_brake_s": _finite(feats["final_brake_duration"]),
+            "brake_rates": [_finite(x) for x in feats["brake_rates"]],
+            "regime_share": {REGIME_NAMES[c]: float(dt[regimes == c].sum() / running) for c in (1, 2, 3, 4)}}
 
 
 def table_span(path: str, time_column: str) -> float | None:
@@ -54,7 +78,7 @@ class TrainResistanceMeasured(Study):
     default_variant = "measured"
     roles = ROLES
     figures_of_signals = PLOTS
-    summary_metrics = ("*.r?_final", "*.speed_residual_kmh", "*.seconds")
+    summary_metrics = ("*.r?_final", "*.speed_residual_kmh", "*.seconds", "*.features.*")
 
     def bind(self, system) -> dict:
         """The roles, and the check that the run outlasts one GNSS sample (the step size)."""
@@ -84,6 +108,8 @@ class TrainResistanceMeasured(Study):
                          "speed_residual_kmh": float(np.sqrt(np.mean(e_v * e_v))),
                          "position_residual_m": float(np.sqrt(np.mean(e_s * e_s))),
                          "seconds": float(run.base["observers"].get(name, {}).get("wall_time_s", float("nan")))}
+            if f"{name}.acceleration" in est and f"{name}.effort" in est:
+                out[name]["features"] = features_of(t, est, name)
         return out
 
     def report_md(self, metrics: dict) -> str:
@@ -97,7 +123,19 @@ class TrainResistanceMeasured(Study):
             L.append(f"| {n} | {e['r0_final']:.6g} | {e['r1_final']:.6g} | {e['r2_final']:.6g} | "
                      f"{e['resistance_at_100kmh']:.5g} | {e['speed_residual_kmh']:.3f} | "
                      f"{e['position_residual_m']:.2f} | {e['seconds']:.3f} |")
-        L += ["", "Residuals: the estimate against the measured fix (no ground truth in a measured run)."]
+        L += ["", "Residuals: the estimate against the measured fix (no ground truth in a measured run).", ""]
+        with_features = [n for n in names if "features" in metrics[n]]
+        if with_features:
+            L += ["## Features (§3.3, on the recognised regimes)", "",
+                  "| estimator | max. power [W/kg] | max. effort [N/kg] | cruise speed [km/h] | final coast [min] | "
+                  "final brake [s] | brake rate per ATB-EG step [m/s2] | traction / cruising / coasting / braking [%] |",
+                  "|---|---|---|---|---|---|---|---|"]
+            for n in with_features:
+                f = metrics[n]["features"]
+                L.append(f"| {n} | {_f(f['max_power_w_per_kg'], '.2f')} | {_f(f['max_effort_n_per_kg'], '.3f')} | "
+                         f"{_f(f['cruise_speed_kmh'], '.1f')} | {_f(f['final_coast_min'], '.2f')} | "
+                         f"{_f(f['final_brake_s'], '.0f')} | {', '.join(_f(x, '.3f') for x in f['brake_rates'])} | "
+                         f"{' / '.join(format(100 * x, '.1f') for x in f['regime_share'].values())} |")
         return "\n".join(L)
 
     def table_md(self, table: dict[str, dict]) -> str:
