@@ -83,21 +83,25 @@ class TrainResistanceMeasured(Study):
     def bind(self, system) -> dict:
         """The roles, and the check that the run outlasts one GNSS sample (the step size)."""
         roles = super().bind(system)
+        spec = next(o for o in system.observers if o.name == REFERENCE)
+        roles["gnss_period"] = period = spec.period if spec.period is not None else system.step_size
         span = table_span(str(roles["file"]), str(roles["time_column"]))
-        if span is not None and span < system.step_size:
+        if span is not None and span < period:
             raise UserError(f"replay.file {roles['file']}: the run lasts {span:g} s, shorter than one GNSS sample "
-                            f"({system.step_size:g} s, the step size): nothing to estimate")
+                            f"({period:g} s, the observers' sample period): nothing to estimate")
         return roles
 
     def metrics(self, run: RunData) -> dict:
         sig, est, roles = run.signals, run.estimates, run.roles
-        t = np.asarray(est["time"])
-        step = float(run.base["step_size_s"])
-        if len(t) < 2:
+        period = float(roles["gnss_period"])
+        rows = np.arange(0, len(est["time"]), round(period / float(run.base["step_size_s"])))  # the samples
+        if len(rows) < 2:
             raise UserError(f"replay.file {roles['file']}: the run ends before its second GNSS sample "
-                            f"({step:g} s, the step size): nothing to estimate")
-        z_s = np.asarray(sig[roles["position"]])[:len(t)]
-        z_v = np.asarray(sig[roles["speed"]])[:len(t)] * KMH  # the connector's km/h
+                            f"({period:g} s, the observers' sample period): nothing to estimate")
+        t = np.asarray(est["time"])[rows]
+        est = {k: np.asarray(x)[rows] for k, x in est.items() if len(x) == len(est["time"])}
+        z_s = np.asarray(sig[roles["position"]])[rows]
+        z_v = np.asarray(sig[roles["speed"]])[rows] * KMH  # the connector's km/h
         out: dict = {"fixes": len(t), "run_time_s": float(t[-1] - t[0]), "top_speed_kmh": float(np.max(z_v) / KMH)}
         for name in estimators_of(est):
             r_hat = np.array([float(est[f"{name}.r{k}"][-1]) for k in range(3)])
