@@ -31,6 +31,7 @@ bench: build
 	$(BIN)/python benchmarks/step_cost.py
 	$(BIN)/python benchmarks/masters.py
 	$(BIN)/python benchmarks/overhead.py
+	$(BIN)/python benchmarks/train_ukf.py
 
 clean:
 	rm -rf build $(OUT) .pytest_cache

@@ -15,7 +15,10 @@ both see the same samples):
   is 0, or, for an event-driven observer, where it has not changed since the last sample;
   the observer updates with the channels present (its ``mask``);
 * **offline observers** (``offline="true"``: smoothers, batch identification) get the whole
-  record once the run has ended and write ``estimates_<name>.csv``.
+  record once the run has ended and write ``estimates_<name>.csv``;
+* **FMU process models**: the setting ``process_component`` names a component whose FMU (one
+  more instance, the component's parameters) becomes the observer's ``process``
+  (:mod:`experiments.fmu_process`); it is freed when the run closes.
 
 ``estimates.csv`` (the online estimates, each held between its observer's samples) is
 written as the run goes, like ``signals.csv``.
@@ -40,9 +43,11 @@ from fmus.ssp.units import OURS, Units, conversion
 _STRIDE_RTOL = 1e-9
 
 
-def make_observer(spec: ObserverSpec, step_size: float, where: str):
+def make_observer(spec: ObserverSpec, step_size: float, where: str, system: System | None = None):
     """Import ``spec.cls`` and instantiate it at its sample period with the spec's settings;
-    returns ``(estimator, stride)`` (its period in system steps). A UserError if not possible."""
+    returns ``(estimator, stride)`` (its period in system steps). A UserError if not possible.
+    The setting ``process_component`` names a component of ``system`` whose FMU becomes the
+    estimator's process model (``process``; :mod:`experiments.fmu_process`)."""
     label = f"{where}: Observer {spec.name!r}"
     period = spec.period if spec.period is not None else step_size
     stride = round(period / step_size)
@@ -58,9 +63,16 @@ def make_observer(spec: ObserverSpec, step_size: float, where: str):
     if offline != spec.offline:
         raise UserError(f"{label}: {spec.cls} is an {'offline' if offline else 'online'} estimator; "
                         f"declare it with offline=\"{str(offline).lower()}\"")
+    settings = dict(spec.settings)
+    process = None
+    if "process_component" in settings:
+        process = _process_model(cls, str(settings.pop("process_component")), system, label, spec.name)
+        settings["process"] = process
     try:
-        obs = cls(period, **spec.settings)
+        obs = cls(period, **settings)
     except (TypeError, ValueError, OSError) as exc:  # OSError: a file a setting names (a line profile)
+        if process is not None:
+            process.close()
         raise UserError(f"{label}: bad settings: {exc}") from None
     for kind, declared, bound in (("measurements", obs.measurements, spec.measurements),
                                   ("inputs", obs.inputs, spec.inputs)):
@@ -76,6 +88,19 @@ def make_observer(spec: ObserverSpec, step_size: float, where: str):
     if bad_truth:
         raise UserError(f"{label}: Truth {bad_truth[0]!r} is not one of its outputs ({', '.join(obs.outputs)})")
     return obs, stride
+
+
+def _process_model(cls, name: str, system: System | None, label: str, observer: str):
+    """An FMU process model on component ``name`` of ``system`` (experiments.fmu_process)."""
+    from .fmu_process import process_model
+
+    try:
+        component = system.component(name) if system is not None else None
+    except KeyError:
+        component = None
+    if component is None:
+        raise UserError(f"{label}: process_component {name!r} is not a component of the system")
+    return process_model(cls, component, label, observer)
 
 
 def unit_map(spec: ObserverSpec, obs, kind: str, name: str, signal: str, where: str) -> tuple[float, float]:
@@ -160,7 +185,7 @@ class ObserverBank:
         self.online: list[_Feed] = []
         self.offline: list[_Feed] = []
         for spec in system.observers:
-            obs, stride = make_observer(spec, system.step_size, where)
+            obs, stride = make_observer(spec, system.step_size, where, system)
             feed = _Feed(spec, obs, stride, event=spec.event if spec.event is not None else obs.event_driven)
             feed.z_map = _affine([unit_map(spec, obs, "measurement", k, spec.measurements[k], where)
                                   for k in obs.measurements])
@@ -239,6 +264,10 @@ class ObserverBank:
             self.recorder.close(complete)
         if complete and self.offline and self._record:
             self._run_offline()
+        for f in (*self.online, *self.offline):  # an FMU process model frees its instance
+            close = getattr(f.obs, "close", None)
+            if callable(close):
+                close()
 
     def _run_offline(self) -> None:
         """Each offline observer on the whole record (its own sample rows), to estimates_<name>.csv."""

@@ -19,7 +19,17 @@ start values are the vehicle's Davis coefficients below divided by ``gamma m`` (
 mass-specific form, f = F / (gamma m)). ``i(s)`` and the speed limit come from the line
 profile (``models/line_profile.py``: the CSV and its look-up). An RK4 step that brakes
 through ``v = 0`` ends slightly below it; the FMU then sets ``v = 0`` at the communication
-point (the train does not roll back on its brakes). The C is hand-written
+point (the train does not roll back on its brakes).
+
+Inputs for a process model (a sigma-point filter propagating its state through this FMU,
+``fmus/cosim/process_model.py``; both false by default, and then nothing changes)::
+
+    set_state       true at the start of fmi2DoStep: (s, v) := (s_set, v_set), then integrate
+    use_effort_set  true: the applied mass-specific effort f_t - f_b is effort_set (N/kg),
+                    held over the step, instead of the command through the envelope
+
+They are inputs, not writes to the states (FMI 2.0 lets an importer set a state only
+before initialisation ends). The C is hand-written
 (``fmus/native/models/TrainLongitudinal.c``, for the profile look-up); :class:`Train` is its
 Python twin.
 
@@ -101,6 +111,14 @@ def build() -> Model:
         Input("r0", "Davis constant term (mass-specific)", "N/kg", R0, source=TTOBENCH),
         Input("r1", "Davis linear term (mass-specific)", "N.s/(m.kg)", R1, source=TTOBENCH),
         Input("r2", "Davis quadratic term (mass-specific)", "N.s2/(m2.kg)", R2, source=TTOBENCH),
+        Input("s_set", "Position the state takes at the start of a step where set_state is true", "m", 0.0),
+        Input("v_set", "Speed the state takes at the start of a step where set_state is true", "m/s", 0.0),
+        Input("set_state", "True: (s, v) := (s_set, v_set) at the start of each step (a process "
+              "model's sigma point)", start=False, type="Boolean"),
+        Input("effort_set", "Applied mass-specific effort f_t - f_b where use_effort_set is true",
+              "N/kg", 0.0),
+        Input("use_effort_set", "True: the applied effort is effort_set, not the command through the "
+              "traction envelope and brake", start=False, type="Boolean"),
     ]
     states = [State("s", "Position along the line", "m", 0.0),
               State("v", "Speed", "m/s", 0.0)]
@@ -122,6 +140,7 @@ def build() -> Model:
         integrator_step=0.05,
         default_experiment=(0.0, 1500.0, 1.0),
         c_sources=["LineProfile.h", "TrainLongitudinal.c"],
+        c_constants={"MODEL_STEP_BEGIN": 1},  # set_state acts at the start of fmi2DoStep
         resources={"line.csv": DEFAULT_LINE},
         documentation=__doc__,
     )
@@ -139,7 +158,8 @@ class Train:
     def __init__(self, params: Mapping[str, float] | None = None, line: LineProfile | Path | str | None = None):
         self.p = {**TRAIN_LONGITUDINAL.default_parameters(), "integrator_step": 0.05, **(params or {})}
         self.line = line if isinstance(line, LineProfile) else LineProfile.read(line or DEFAULT_LINE)
-        self.u = {"command": 0.0, "r0": R0, "r1": R1, "r2": R2}
+        self.u = {"command": 0.0, "r0": R0, "r1": R1, "r2": R2, "s_set": 0.0, "v_set": 0.0,
+                  "set_state": False, "effort_set": 0.0, "use_effort_set": False}
         self.s, self.v, self.t = 0.0, 0.0, 0.0
 
     @property
@@ -160,12 +180,18 @@ class Train:
         k = self.line.row(s)
         return G0 * (float(self.line.gradient[k]) / 1000.0 + float(self.line.curve[k])) / self.p["rotating_mass_factor"]
 
-    def accel(self, s: float, v: float) -> float:
+    def applied(self, v: float) -> float:
+        """f_t - f_b (N/kg): ``effort_set`` where ``use_effort_set``, else through the envelope."""
+        if self.u["use_effort_set"]:
+            return self.u["effort_set"]
         Ft, fb = self.efforts(v)
-        ft, g, u = Ft / self.m_eff, self.grade(s), self.u
+        return Ft / self.m_eff - fb
+
+    def accel(self, s: float, v: float) -> float:
+        e, g, u = self.applied(v), self.grade(s), self.u
         if v > 0:
-            return ft - fb - (u["r0"] + u["r1"] * v + u["r2"] * v * v) - g
-        r = ft - fb - u["r0"] - g
+            return e - (u["r0"] + u["r1"] * v + u["r2"] * v * v) - g
+        r = e - u["r0"] - g
         return r if r > 0 else 0.0
 
     def _f(self, x):
@@ -175,6 +201,8 @@ class Train:
         q = h / self.p["integrator_step"] - 1e-9
         n = max(int(np.ceil(q)) if q > 0 else 0, 1)
         dt = h / n
+        if self.u["set_state"]:
+            self.s, self.v = float(self.u["s_set"]), float(self.u["v_set"])
         x = [self.s, self.v]
         for _ in range(n):
             k1 = self._f(x)
@@ -190,10 +218,12 @@ class Train:
     def outputs(self) -> dict[str, float]:
         v, m = self.v, self.m_eff
         Ft, fb = self.efforts(v)
-        effort = Ft - fb * m
+        effort, specific = Ft - fb * m, Ft / m - fb
         u = self.u
+        if u["use_effort_set"]:
+            effort, specific = u["effort_set"] * m, u["effort_set"]
         return {"s": self.s, "v": v, "acceleration": self.accel(self.s, v), "effort": effort,
-                "effort_specific": Ft / m - fb, "power": effort * v,
+                "effort_specific": specific, "power": effort * v,
                 "resistance_specific": u["r0"] + u["r1"] * v + u["r2"] * v * v,
                 "gradient": self.line.gradient_at(self.s), "gradient_specific": self.grade(self.s),
                 "speed_limit": self.line.limit_at(self.s)}

@@ -32,18 +32,25 @@ static double gradient_term(ModelInstance *m, double s) { /* g(s): gradient + cu
     return G0 * (p->gradient[k] / 1000.0 + p->curve[k]) / m->r[VR_rotating_mass_factor];
 }
 
-static double accel(ModelInstance *m, double s, double v) {
-    double Ft, fb, ft, r;
-    const double g = gradient_term(m, s);
+/* The applied mass-specific effort f_t - f_b (N/kg) at speed v: effort_set where
+   use_effort_set is true (a process model's known input), else the command's. */
+static double applied(const ModelInstance *m, double v) {
+    double Ft, fb;
+    if (m->b[VRB_use_effort_set]) return m->r[VR_effort_set];
     efforts(m, v, &Ft, &fb);
-    ft = Ft / effective_mass(m);
+    return Ft / effective_mass(m) - fb;
+}
+
+static double accel(ModelInstance *m, double s, double v) {
+    double r;
+    const double g = gradient_term(m, s), e = applied(m, v);
     if (v > 0) {
         r = m->r[VR_r0] + m->r[VR_r1] * v + m->r[VR_r2] * v * v;
-        return ft - fb - r - g;
+        return e - r - g;
     }
     /* at rest the brakes and the static resistance r0 hold the train: it starts only when
        the net force is forward */
-    r = ft - fb - m->r[VR_r0] - g;
+    r = e - m->r[VR_r0] - g;
     return r > 0 ? r : 0.0;
 }
 
@@ -73,6 +80,16 @@ static int load(ModelInstance *m) {
 
 int model_initialize(ModelInstance *m) { return load(m); }
 
+/* set_state: the step starts from (s_set, v_set), a process model's sigma point (the runtime
+   refuses non-finite inputs when they are set) */
+int model_step_begin(ModelInstance *m) {
+    if (m->b[VRB_set_state]) {
+        m->r[VR_s] = m->r[VR_s_set];
+        m->r[VR_v] = m->r[VR_v_set];
+    }
+    return 0;
+}
+
 void model_derivatives(ModelInstance *m, double t, const double *x, double *dx) {
     (void)t;
     dx[0] = x[1] > 0 ? x[1] : 0.0; /* ds/dt = v */
@@ -91,6 +108,10 @@ int model_outputs(ModelInstance *m) {
     m->r[VR_acceleration] = accel(m, m->r[VR_s], v);
     m->r[VR_effort] = Ft - fb * effective_mass(m);
     m->r[VR_effort_specific] = Ft / effective_mass(m) - fb;
+    if (m->b[VRB_use_effort_set]) {
+        m->r[VR_effort] = m->r[VR_effort_set] * effective_mass(m);
+        m->r[VR_effort_specific] = m->r[VR_effort_set];
+    }
     m->r[VR_power] = m->r[VR_effort] * v;
     m->r[VR_resistance_specific] = m->r[VR_r0] + m->r[VR_r1] * v + m->r[VR_r2] * v * v;
     m->r[VR_gradient] = p->gradient[k];

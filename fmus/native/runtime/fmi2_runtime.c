@@ -1502,6 +1502,9 @@ fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint,
     /* the model asked to end before this step (at initialisation, or at a get after a
        set): nothing is computed, the FMU stays at r[0] */
     if (inst->terminateRequested) return end_simulation(m, "fmi2DoStep");
+#if defined(MODEL_STEP_BEGIN) && MODEL_STEP_BEGIN
+    if (model_step_begin(m) != 0) return fmi2Error;
+#endif
 
     /* r[0] stays t0 during the integration (model.h: inputs with first-order hold use
        t - r[0]); a failure below leaves the instance in state Error. */

@@ -128,6 +128,13 @@ void model_derivatives(ModelInstance *m, double t, const double *x, double *dx);
    initialisation mode, after model_initialize, so the importer reads consistent initial
    outputs (FMI 2.0.4, 4.2.4 InitialUnknowns). */
 int model_outputs(ModelInstance *m);
+#if defined(MODEL_STEP_BEGIN) && MODEL_STEP_BEGIN
+/* Optional (MODEL_STEP_BEGIN 1 in model_config.h): called by fmi2DoStep before it integrates,
+   with the step's inputs set; a model may take its states from inputs here (a process
+   model's sigma point). Non-zero = error, already logged, nothing changed: the step is
+   refused with fmi2Error and the instance stays usable. */
+int model_step_begin(ModelInstance *m);
+#endif
 /* After fmi2SetFMUstate: rebuild modelData from the restored parameters. */
 int model_state_restored(ModelInstance *m);
 void model_free(ModelInstance *m);
