@@ -249,7 +249,7 @@ def test_a_run_shorter_than_one_gnss_sample_is_a_clear_error(text, span, tmp_pat
     assert res.returncode == 2 and "Traceback" not in res.stderr
     assert res.stderr.strip().splitlines() == [
         f"railfmu: error: replay.file {run}: the run lasts {span} s, shorter than one GNSS sample (10 s, the "
-        "step size): nothing to estimate"]
+        "observers' sample period): nothing to estimate"]
 
 
 @pytest.mark.slow
