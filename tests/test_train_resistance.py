@@ -64,10 +64,10 @@ def test_standard_run_end_to_end(standard):
     # the seeded factors, constant over the run (bias + sigma w of the SensorNoise, exactly)
     assert m["early_end"] and sig["train.v"][-1] == 0.0 and abs(sig["train.s"][-1] - 32103) < 5
     r_pub = np.array([R0, R1, R2])
-    r_true = np.array([sig[f"train.r{k}"][-1] for k in range(3)])
+    r_true = np.array([sig[f"resistance.y_{4 + k}"][-1] for k in range(3)])
     np.testing.assert_allclose(r_true, r_pub * factors(SEED), rtol=1e-14)
     for k in range(3):
-        assert np.ptp(sig[f"train.r{k}"]) == 0.0
+        assert np.ptp(sig[f"resistance.y_{4 + k}"]) == 0.0
     assert m["truth"]["r0"] == r_true[0]
 
     # metrics recomputed from the CSVs: at the GNSS fixes after the first
@@ -131,12 +131,12 @@ def test_variants_set_the_truth_they_name(tmp_path, fmu_dir):
             (tmp_path / variant / "metrics.json").read_text())
     sig, m = runs["heavy_load"]
     heavy = np.array(davis_specific(1.06 * (297e3 + 570 * 80.0)))
-    np.testing.assert_allclose([sig[f"train.r{k}"][-1] for k in range(3)], heavy * f, rtol=1e-14)
+    np.testing.assert_allclose([sig[f"resistance.y_{4 + k}"][-1] for k in range(3)], heavy * f, rtol=1e-14)
     assert m["parameters"]["train"]["load_mass"] == 45600.0
     sig, m = runs["resistance_drift"]
-    # Jacobi: the train steps from t with the headwind of t - 1 s (the previous communication point)
-    t = np.maximum(sig["time"] - 1.0, 0.0)
-    np.testing.assert_allclose(sig["train.r2"], R2 * f[2] + 0.36 * R2 * t / 1800.0, rtol=1e-12)
+    # the truth: the resistance source's output at t (the train steps on it from t)
+    t = sig["time"]
+    np.testing.assert_allclose(sig["resistance.y_6"], R2 * f[2] + 0.36 * R2 * t / 1800.0, rtol=1e-12)
     assert m["truth"]["r2"] == pytest.approx(R2 * (f[2] + 0.3 * t[-1] / 1500.0), rel=1e-12)
     sig, m = runs["gnss_1hz"]
     assert np.all(sig["gnss.valid"] == 1)
