@@ -18,7 +18,10 @@ both see the same samples):
   record once the run has ended and write ``estimates_<name>.csv``;
 * **FMU process models**: the setting ``process_component`` names a component whose FMU (one
   more instance, the component's parameters) becomes the observer's ``process``
-  (:mod:`experiments.fmu_process`); it is freed when the run closes.
+  (:mod:`experiments.fmu_process`); it is freed when the run closes;
+* **settings bound to signals** (``rf:Setting name connector``): the observer is created
+  again at its first sample with those settings set to the signals' values there, in its
+  units (an INS started from the vehicle's true initial state).
 
 ``estimates.csv`` (the online estimates, each held between its observer's samples) is
 written as the run goes, like ``signals.csv``.
@@ -49,7 +52,7 @@ def make_observer(spec: ObserverSpec, step_size: float, where: str, system: Syst
     The setting ``process_component`` names a component of ``system`` whose FMU becomes the
     estimator's process model (``process``; :mod:`experiments.fmu_process`)."""
     label = f"{where}: Observer {spec.name!r}"
-    period = spec.period if spec.period is not None else step_size
+    period = _period(spec, step_size)
     stride = round(period / step_size)
     if stride < 1 or abs(stride * step_size - period) > _STRIDE_RTOL * period:
         raise UserError(f"{label}: samplePeriod {period:g} s is not a whole number of system steps "
@@ -103,6 +106,27 @@ def _process_model(cls, name: str, system: System | None, label: str, observer: 
     return process_model(cls, component, label, observer)
 
 
+def _period(spec: ObserverSpec, step_size: float) -> float:
+    return spec.period if spec.period is not None else step_size
+
+
+def bind_settings(feed: _Feed, row: np.ndarray, columns: list[int], where: str) -> None:
+    """Create ``feed``'s observer again with its signal-bound settings set to their values in
+    ``row`` (its first sample; ``columns`` their indices in ``row``), in the observer's units."""
+    spec = feed.spec
+    values = {k: a * float(row[i]) + b for k, i, (a, b) in zip(spec.setting_signals, columns, feed.set_map)}
+    settings = dict(spec.settings)
+    if "process_component" in settings:  # the FMU process model of the first instance, kept
+        settings.pop("process_component")
+        settings["process"] = getattr(feed.obs, "process", None)
+    try:
+        feed.obs = type(feed.obs)(feed.period, **settings, **values)
+    except (TypeError, ValueError) as exc:
+        raise UserError(f"{where}: Observer {spec.name!r}: bad settings from signals "
+                        f"({', '.join(f'{k} = {spec.setting_signals[k]}' for k in values)}): {exc}") from None
+    feed.bound = values
+
+
 def unit_map(spec: ObserverSpec, obs, kind: str, name: str, signal: str, where: str) -> tuple[float, float]:
     """``(a, b)``: the value in the observer's unit of ``name`` is ``a * signal + b``. A
     UserError naming observer, channel and both units when they cannot be converted."""
@@ -146,9 +170,13 @@ class _Feed:
     u_map: tuple | None = None
     truth_map: dict[str, tuple[float, float]] = field(default_factory=dict)
     event: bool = False
+    period: float = 0.0
+    set_map: list[tuple[float, float]] = field(default_factory=list)  # signal-bound settings
+    bound: dict[str, float] = field(default_factory=dict)  # their values at the first sample
     # set by open(): column indices into the recorded rows
     iz: list[int] = field(default_factory=list)
     iu: list[int] = field(default_factory=list)
+    iset: list[int] = field(default_factory=list)
     flagged: list[int] = field(default_factory=list)  # measurement positions with a valid flag
     iflag: list[int] = field(default_factory=list)
     last_z: np.ndarray | None = None
@@ -181,12 +209,15 @@ class ObserverBank:
 
     def __init__(self, system: System, out_csv: Path | None):
         where = str(system.source or system.name)
+        self.where = where
         self.step_size = system.step_size
         self.online: list[_Feed] = []
         self.offline: list[_Feed] = []
         for spec in system.observers:
             obs, stride = make_observer(spec, system.step_size, where, system)
-            feed = _Feed(spec, obs, stride, event=spec.event if spec.event is not None else obs.event_driven)
+            feed = _Feed(spec, obs, stride, event=spec.event if spec.event is not None else obs.event_driven,
+                         period=_period(spec, system.step_size))
+            feed.set_map = [unit_map(spec, obs, "setting", k, sig, where) for k, sig in spec.setting_signals.items()]
             feed.z_map = _affine([unit_map(spec, obs, "measurement", k, spec.measurements[k], where)
                                   for k in obs.measurements])
             feed.u_map = _affine([unit_map(spec, obs, "input", k, spec.inputs[k], where) for k in obs.inputs])
@@ -223,6 +254,7 @@ class ObserverBank:
             s = f.spec
             f.iz = [index(f, s.measurements[k]) for k in f.obs.measurements]
             f.iu = [index(f, s.inputs[k]) for k in f.obs.inputs]
+            f.iset = [index(f, sig) for sig in s.setting_signals.values()]
             f.flagged = [j for j, k in enumerate(f.obs.measurements) if k in s.valid]
             f.iflag = [index(f, s.valid[f.obs.measurements[j]]) for j in f.flagged]
             f.last_z, f.estimate = None, None
@@ -230,7 +262,7 @@ class ObserverBank:
             f.obs.reset(0.0)
             f.seconds = 0.0
         # the offline observers' columns, kept for after the run
-        self._kept = sorted({0, *(i for f in self.offline for i in (*f.iz, *f.iu, *f.iflag))})
+        self._kept = sorted({0, *(i for f in self.offline for i in (*f.iz, *f.iu, *f.iflag, *f.iset))})
         self._record: list[np.ndarray] = []
         self._row = 0
         self.times, self.estimates, self.results = [], [], {}
@@ -242,6 +274,9 @@ class ObserverBank:
         t, k = float(row[0]), self._row
         self._row += 1
         for f in self.online:
+            if k == 0 and f.iset:
+                bind_settings(f, row, f.iset, self.where)
+                f.obs.reset(0.0)
             if k % f.stride == 0:
                 Z, U, mask = f.sample(row[None, :])
                 t0 = time.perf_counter()
@@ -275,6 +310,8 @@ class ObserverBank:
         at = {c: j for j, c in enumerate(self._kept)}
         for f in self.offline:
             rows = kept[::f.stride]
+            if f.iset:
+                bind_settings(f, kept[0], [at[i] for i in f.iset], self.where)
             local = _Feed(f.spec, f.obs, f.stride, f.z_map, f.u_map, event=f.event,
                           iz=[at[i] for i in f.iz], iu=[at[i] for i in f.iu], flagged=f.flagged,
                           iflag=[at[i] for i in f.iflag])
@@ -328,6 +365,8 @@ class ObserverBank:
     @staticmethod
     def _scores(f: _Feed, t: np.ndarray, est: np.ndarray, n0: int, signals: dict) -> dict:
         m: dict = dict(f.obs.finish())
+        if f.bound:
+            m["settings_from_signals"] = dict(f.bound)
         rows = np.arange(0, len(t), f.stride)
         rows = rows[rows >= n0]
         if len(t) <= n0:

@@ -176,6 +176,7 @@ def run_experiment(name: str, variant: str | None = None, out: Path | str | None
         metrics = {**metrics, "series": arrays}
     if not write_files:
         return metrics
+    files = exp.study.files(RunData(signals, estimates, metrics, roles), out)
 
     from .plots import plot_estimates, plot_signals, units_of
 
@@ -186,7 +187,7 @@ def run_experiment(name: str, variant: str | None = None, out: Path | str | None
              + exp.study.figures(RunData(signals, estimates, metrics, roles), out))
     _report(exp, system, metrics, plots, out)
     offline = [f"estimates_{name}.csv" for name in bank.results]
-    print(f"wrote {out}/: {', '.join(['signals.csv', 'estimates.csv', *offline, 'metrics.json', 'report.md', *plots])}",
+    print(f"wrote {out}/: {', '.join(['signals.csv', 'estimates.csv', *offline, *files, 'metrics.json', 'report.md', *plots])}",
           file=log)
     return metrics
 

@@ -140,6 +140,11 @@ class Study:
         estimates to ``run.estimates`` for :meth:`figures`, which runs next."""
         return {}
 
+    def files(self, run: RunData, out: Path) -> list[str]:
+        """Data files the study writes into ``out`` beside signals.csv, in a form other tools
+        read (default: none); their file names. Not called for Monte Carlo members."""
+        return []
+
     def figures(self, run: RunData, out: Path) -> list[str]:
         """The study's own figures written into ``out``; their file names."""
         return []

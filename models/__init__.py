@@ -19,10 +19,11 @@ def all_models() -> list[Model]:
     from .track import TRACK
     from .vehicle_lateral import VEHICLE_LATERAL
     from .train_longitudinal import TRAIN_LONGITUDINAL
+    from .trolley import TROLLEY
     from .wheelset import WHEELSET
 
     return [TRACK, WHEELSET, COACH_VERTICAL, STEP_SOURCE, SENSORS, VEHICLE_LATERAL, SIGNAL_TABLE,
-            TRAIN_LONGITUDINAL, GNSS_RECEIVER, DRIVER, IMU_ERRORS]
+            TRAIN_LONGITUDINAL, GNSS_RECEIVER, DRIVER, IMU_ERRORS, TROLLEY]
 
 
 __all__ = ["Input", "Model", "Output", "Parameter", "State", "Variable", "all_models"]

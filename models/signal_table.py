@@ -6,8 +6,9 @@ SSP, like any other FMU; other tools (libcosim, OMSimulator) run it too.
 
 The file (parameter ``file``: an absolute path, or relative to the FMU's ``resources/``)::
 
-    time,position,speed,gnss_valid,regime      <- header: first column "time" (s; parameter
-    0.0,0.0,0.0,1,0                               time_column names it otherwise), then names
+    time,position,speed,gnss_valid,regime      <- header: first column "time" (s), then names
+                                                  ("time_s" too: the standard imu.csv, truth.csv)
+    0.0,0.0,0.0,1,0
     1.0,0.5,1.0,1,1
 
 Channels: ``y_1 .. y_16`` (Real) play the columns named by ``column_1 .. column_16``;
@@ -76,9 +77,9 @@ def build() -> Model:
         Parameter("after_end", "After the table's last time: 0 = hold the last row, 1 = end the "
                   "co-simulation there (fmi2Discard, fmi2Terminated)", start=0, type="Integer",
                   min=0, max=1, source=src),
-        Parameter("file", "CSV table: header line with the time (s) first (named by time_column), "
-                  "then named columns; an absolute path or relative to the FMU's resources/ "
-                  "(example.csv is shipped); empty = no table, every channel 0", start="", type="String", source=src),
+        Parameter("file", "CSV table: header line with 'time' or 'time_s' (s) first, then named columns; an "
+                  "absolute path or relative to the FMU's resources/ (example.csv is shipped); "
+                  "empty = no table, every channel 0", start="", type="String", source=src),
     ]
     parameters += [Parameter(f"column_{k}", f"Name of the CSV column that y_{k} plays (empty: "
                              "unbound, 0)", start="", type="String", source=src)
@@ -89,9 +90,6 @@ def build() -> Model:
     parameters += [Parameter(f"integer_column_{k}", f"Name of the integer CSV column that "
                              f"integer_{k} plays (empty: unbound, 0)", start="", type="String",
                              source=src) for k in range(1, N_INTEGER + 1)]
-    # last, so that the channels' string value references stay consecutive (the C relies on it)
-    parameters += [Parameter("time_column", "Name of the first column, the time in s (a measured "
-                             "run may call it time_s)", start="time", type="String", source=src)]
     outputs = [Output(f"y_{k}", f"The column named by column_{k}, in that column's unit (the "
                       "file's); exactly the file's value at its times", "") for k in range(1, N_REAL + 1)]
     outputs += [Output(f"boolean_{k}", f"The 0/1 column named by boolean_column_{k} (held between "

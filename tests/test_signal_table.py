@@ -215,7 +215,7 @@ BAD = [  # (file text or None = missing, parameters, the message after the path)
     (GOOD.replace("0.5,2.0,1,2", "0.5,2.0,1"), {}, ", line 3: 3 fields, but the header has 4 columns"),
     (GOOD.replace("2.0,1,2", "2.0,2,2"), {}, ", line 3, column 3 (flag): '2' is not 0 or 1"),
     (GOOD.replace("1.0,3.0,1,3", "1.0,3.0,1,3.5"), {}, ", line 4, column 4 (n): '3.5' is not an integer"),
-    (GOOD.replace("time,", "t,"), {}, ", line 1, column 1: the first column must be 'time' (s), not 't'"),
+    (GOOD.replace("time,", "t,"), {}, ", line 1, column 1: the first column must be 'time' or 'time_s' (s), not 't'"),
     ("time,x,flag,n\n", {}, ", line 2: no data rows after the header"),
 ]
 BAD_IDS = ["missing-file", "missing-column", "non-monotonic", "repeated-time", "nan", "text", "ragged",

@@ -223,8 +223,8 @@ BAD = {  # file text -> the one error line's tail
             "line 3, column 2 (position_m): 'nan' is not a finite number"),
     "text": ("time_s,position_m,speed_kmh\n0,0,0\n10,12 m,30\n",
              "line 3, column 2 (position_m): '12 m' is not a number"),
-    "wrong-time-column": ("time,position_m,speed_kmh\n0,0,0\n10,100,30\n",
-                          "line 1, column 1: the first column must be 'time_s' (s), not 'time'"),
+    "wrong-time-column": ("t,position_m,speed_kmh\n0,0,0\n10,100,30\n",
+                          "line 1, column 1: the first column must be 'time' or 'time_s' (s), not 't'"),
 }
 
 

@@ -31,7 +31,7 @@ from fmus.errors import UserError
 
 REFERENCE = "ukf_paper"
 ROLES = {"position": measurement(REFERENCE, "position"), "speed": measurement(REFERENCE, "speed"),
-         "file": parameter("replay", "file"), "time_column": parameter("replay", "time_column")}
+         "file": parameter("replay", "file")}
 PLOTS = {"measured.png": ("The replayed run", [[("position", "position [m]")], [("speed", "speed [km/h]")]])}
 
 
@@ -57,13 +57,13 @@ def features_of(t: np.ndarray, est: dict, name: str) -> dict:
             "regime_share": {REGIME_NAMES[c]: float(dt[regimes == c].sum() / running) for c in (1, 2, 3, 4)}}
 
 
-def table_span(path: str, time_column: str) -> float | None:
+def table_span(path: str) -> float | None:
     """Last minus first time of a run CSV, or None when it cannot be read as one (the
     SignalTable FMU then names the file, line and column)."""
     try:
         with open(path, newline="", encoding="utf-8-sig") as f:
             rows = [r for r in csv.reader(f) if any(c.strip() for c in r)]
-        if not rows or rows[0][0].strip() != time_column or len(rows) < 2:
+        if not rows or rows[0][0].strip() not in ("time", "time_s") or len(rows) < 2:
             return None if len(rows) != 1 else 0.0
         t = [float(r[0]) for r in rows[1:]]
     except (OSError, ValueError, IndexError):
@@ -85,7 +85,7 @@ class TrainResistanceMeasured(Study):
         roles = super().bind(system)
         spec = next(o for o in system.observers if o.name == REFERENCE)
         roles["gnss_period"] = period = spec.period if spec.period is not None else system.step_size
-        span = table_span(str(roles["file"]), str(roles["time_column"]))
+        span = table_span(str(roles["file"]))
         if span is not None and span < period:
             raise UserError(f"replay.file {roles['file']}: the run lasts {span:g} s, shorter than one GNSS sample "
                             f"({period:g} s, the observers' sample period): nothing to estimate")

@@ -84,7 +84,9 @@ class ObserverSpec:
     known inputs) map the observer's names to recorded signals ``component.variable``;
     ``valid`` maps a measurement to a flag signal (nonzero: the measurement is there);
     ``truth`` maps estimate names to the recorded signals they are scored against (metrics
-    only, never fed to the estimator); ``settings`` are keyword arguments of the class.
+    only, never fed to the estimator); ``settings`` are keyword arguments of the class;
+    ``setting_signals`` maps a setting to the recorded signal whose value at the observer's
+    first sample it takes (converted to the unit the observer declares for that name).
     ``period``: its sample period in s (None: the system's step); ``event``: its
     measurements arrive as events (None: as its class declares); ``offline``: run once on
     the whole record after the run. ``units``: the unit of each bound signal that has one
@@ -96,6 +98,7 @@ class ObserverSpec:
     inputs: dict[str, str] = field(default_factory=dict)
     truth: dict[str, str] = field(default_factory=dict)
     settings: dict[str, Value] = field(default_factory=dict)
+    setting_signals: dict[str, str] = field(default_factory=dict)
     valid: dict[str, str] = field(default_factory=dict)
     period: float | None = None
     event: bool | None = None
@@ -105,7 +108,8 @@ class ObserverSpec:
     @property
     def signals(self) -> list[str]:
         """Every recorded signal it reads (fed or scored)."""
-        return [*self.measurements.values(), *self.inputs.values(), *self.valid.values(), *self.truth.values()]
+        return [*self.measurements.values(), *self.inputs.values(), *self.valid.values(), *self.truth.values(),
+                *self.setting_signals.values()]
 
 
 @dataclass

@@ -477,6 +477,7 @@ class _Reader:
             spec.period = period
             return True
         spec.settings[setting] = _setting(str(value)) if isinstance(value, str) else value
+        spec.setting_signals.pop(setting, None)  # a value given on purpose wins
         return True
 
     def _aliases(self) -> dict[str, tuple[list[tuple[str, str, str]], str]]:
@@ -539,6 +540,7 @@ class _Reader:
                         raise UserError(f"{where}: {value} not found in the SSP ({self.root.show(path)})")
                     value = str(path.resolve())
                 self.observers[owner].settings[param] = _setting(str(value)) if isinstance(value, str) else value
+                self.observers[owner].setting_signals.pop(param, None)
         return True
 
     def _overrides(self, overrides: dict) -> None:
@@ -656,7 +658,8 @@ class _Reader:
     def _observer(self, el) -> ObserverSpec:
         """``rf:Observer name class [samplePeriod] [sampling="periodic|event"] [offline]`` with
         ``rf:Measurement name connector [valid]``, ``rf:Input`` (known inputs), ``rf:Truth``
-        and ``rf:Setting`` children."""
+        and ``rf:Setting`` children (``value``, or ``connector``: the signal's value at the
+        observer's first sample, e.g. an INS's initial state from the vehicle's start)."""
         name, cls = el.get("name"), el.get("class")
         where = f"{self.at(el)}: Observer {name!r}"
         if not name or not cls:
@@ -688,9 +691,18 @@ class _Reader:
                 flag = self._signal(e, f"{self.at(e)}: Observer {name!r} Measurement {k!r} valid",
                                     attr="valid")
                 valid[k] = flag
+        settings, setting_signals = {}, {}
+        for k, e in named("Setting").items():
+            if e.get("connector") is None:
+                settings[k] = _setting(e.get("value", ""))
+            elif e.get("value") is not None:
+                raise UserError(f"{self.at(e)}: Observer {name!r} Setting {k!r}: give a value or a connector, "
+                                "not both")
+            else:  # the signal's value at the observer's first sample (an initial state)
+                setting_signals[k] = self._signal(e, f"{self.at(e)}: Observer {name!r} Setting {k!r}")
         spec = ObserverSpec(
             name, cls, measurements=bound("Measurement"), inputs=bound("Input"), truth=bound("Truth"),
-            settings={k: _setting(e.get("value", "")) for k, e in named("Setting").items()},
+            settings=settings, setting_signals=setting_signals,
             valid=valid, period=period, event=None if sampling is None else sampling == "event",
             offline=offline == "true")
         spec.units = {sig: u for sig in spec.signals if (u := self._signal_unit(sig, where)) is not None}

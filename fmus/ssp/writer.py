@@ -10,7 +10,9 @@ and each connection's affine map is a ``ssc:LinearTransformation``. A file that 
 parameter names (a measured table, a track profile) goes into that component's FMU, in its
 ``resources/``, and the parameter names it relative to there: our FMUs resolve a relative
 file against their ``resources/``, which every importer (FMPy, libcosim, OMSimulator)
-provides, so the archive runs anywhere without the original file. Reading the archive back
+provides, so the archive runs anywhere without the original file. Components that share an
+FMU share one copy holding all their files (libcosim unpacks an FMU once per GUID, so two
+copies that differ only in resources/ would find one set of files). Reading the archive back
 gives an equal System (apart from paths and those file names).
 """
 
@@ -45,7 +47,8 @@ def write_ssp(system: System, out: Path) -> Path:
     check_system(system)
     mds = {c.name: c.md for c in system.components}
     files = {c.name: _parameter_files(c) for c in system.components}
-    resources = _resource_names(system, files)
+    bundles = _bundles(system, files)
+    resources = _resource_names(system)
     doc = _document(system, mds, resources, files)
     problems = schema_problems(doc, "ssd", "SystemStructure.ssd")
     if problems:  # our own output: a bug, not a user error
@@ -61,8 +64,9 @@ def write_ssp(system: System, out: Path) -> Path:
                 if resources[c.name] in written:
                     continue
                 written.add(resources[c.name])
-                if files[c.name]:
-                    zf.writestr(resources[c.name], _with_resources(Path(c.fmu), files[c.name]))
+                bundle = bundles[Path(c.fmu).resolve()]
+                if bundle:
+                    zf.writestr(resources[c.name], _with_resources(Path(c.fmu), bundle))
                 else:
                     zf.write(c.fmu, resources[c.name])
         os.replace(tmp, out)  # a reader never sees half an archive
@@ -71,22 +75,32 @@ def write_ssp(system: System, out: Path) -> Path:
     return out
 
 
-def _resource_names(system: System, files: dict[str, dict[str, tuple[Path, str]]]) -> dict[str, str]:
-    """Component -> 'resources/<file>.fmu'; one copy per FMU file (and set of files bundled
-    into it), distinct names for distinct contents."""
-    by_file: dict[tuple, str] = {}
-    taken: set[str] = set()
+def _resource_names(system: System) -> dict[str, str]:
+    """Component -> 'resources/<file>.fmu': one copy per FMU file, distinct names."""
+    by_file: dict[Path, str] = {}
     out = {}
     for c in system.components:
         fmu = Path(c.fmu).resolve()
-        key = (fmu, tuple(sorted(files[c.name].values())))
-        if key not in by_file:
+        if fmu not in by_file:
             name = f"resources/{fmu.name}"
-            if name in taken:
-                name = f"resources/{c.name}_{fmu.name}"
-            by_file[key] = name
-            taken.add(name)
-        out[c.name] = by_file[key]
+            by_file[fmu] = name if name not in by_file.values() else f"resources/{c.name}_{fmu.name}"
+        out[c.name] = by_file[fmu]
+    return out
+
+
+def _bundles(system: System, files: dict[str, dict[str, tuple[Path, str]]]) -> dict[Path, dict[Path, str]]:
+    """FMU file -> the files its one copy carries ({path: name in resources/}): those of every
+    component that uses it, a name taken by another file renamed ``<component>_<name>`` (in
+    ``files`` too, so each component's parameter names its own)."""
+    out: dict[Path, dict[Path, str]] = {}
+    for c in system.components:
+        bundle = out.setdefault(Path(c.fmu).resolve(), {})
+        for param, (path, inner) in list(files[c.name].items()):
+            if path not in bundle and inner in bundle.values():
+                inner = f"{c.name}_{inner}"
+                files[c.name][param] = (path, inner)
+            bundle.setdefault(path, inner)
+            files[c.name][param] = (path, bundle[path])
     return out
 
 
@@ -109,13 +123,14 @@ def _parameter_files(c) -> dict[str, tuple[Path, str]]:
     return out
 
 
-def _with_resources(fmu: Path, files: dict[str, tuple[Path, str]]) -> bytes:
-    """The FMU archive with ``files`` added to its resources/ (the rest copied unchanged)."""
+def _with_resources(fmu: Path, files: dict[Path, str]) -> bytes:
+    """The FMU archive with ``files`` ({path: name}) added to its resources/ (the rest copied
+    unchanged)."""
     buf = io.BytesIO()
     with zipfile.ZipFile(fmu) as src, zipfile.ZipFile(buf, "w", zipfile.ZIP_DEFLATED) as dst:
         for info in src.infolist():
             dst.writestr(info, src.read(info))
-        for path, inner in dict(files.values()).items():
+        for path, inner in files.items():
             dst.write(path, f"resources/{inner}")
     return buf.getvalue()
 
@@ -264,6 +279,8 @@ def _system_annotations(sys_el, system: System) -> None:
                     _sub(el, tag, name=k, connector=ref, valid=o.valid.get(k) if tag == "rf:Measurement" else None)
             for k, v in o.settings.items():
                 _sub(el, "rf:Setting", name=k, value=str(v).lower() if isinstance(v, bool) else str(v))
+            for k, ref in o.setting_signals.items():
+                _sub(el, "rf:Setting", name=k, connector=ref)
     if system.record:
         recorder = _sub(_sub(annotations, "ssc:Annotation", type="org.railfmu.recorder"), "rf:Recorder")
         for ref in system.record:

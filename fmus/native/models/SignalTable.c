@@ -219,8 +219,7 @@ static int load(ModelInstance *m, Table *d, const char *path) {
         p += 3; /* UTF-8 byte order mark (spreadsheet exports) */
     line = next_line(&p);
     if (!line) {
-        model_error(m, "file %s, line 1: empty file (expected a header line starting with '%s')", path,
-                    param_string(m, VRS_time_column));
+        model_error(m, "file %s, line 1: empty file (expected a header line starting with 'time')", path);
         goto done;
     }
     nh = split(line, header, MAX_FIELDS);
@@ -235,9 +234,10 @@ static int load(ModelInstance *m, Table *d, const char *path) {
             header[j]++;
         }
     }
-    if (strcmp(header[0], param_string(m, VRS_time_column)) != 0) {
-        model_error(m, "file %s, line 1, column 1: the first column must be '%s' (s), not '%s'",
-                    path, param_string(m, VRS_time_column), header[0]);
+    /* "time_s": the trolley survey's standard imu.csv and truth.csv */
+    if (strcmp(header[0], "time") != 0 && strcmp(header[0], "time_s") != 0) {
+        model_error(m, "file %s, line 1, column 1: the first column must be 'time' or 'time_s' (s), not '%s'",
+                    path, header[0]);
         goto done;
     }
     for (j = 1; j < nh; j++) {

@@ -1,0 +1,144 @@
+"""The trolley survey end to end: a 600 m, 200 Hz run simulated and processed by the INS.
+
+Split (each the fastest of --repeat):
+
+  simulation   Trolley -> ImuErrors stepped by the container master (the native fast path),
+               700 s at 5 ms = 140,000 steps, the recorded signals in memory (no observer,
+               no CSV); the system is read and its FMUs loaded before timing
+  INS          ``StrapdownINS.run`` (the observer of the experiment, offline: one
+               ``Observer.step`` per sample) on the measured increments, from the trolley's
+               state at t = 0
+  python-ins   ``pyins.strapdown`` (numba, compiled before timing) on the same increments
+
+and, for reference, what ``railfmu run trolley_survey --master container`` adds around them
+(the online observer bank row by row, signals.csv / estimates.csv / imu.csv / truth.csv, plots):
+its ``timing_s`` from metrics.json with ``--full``. The INS's position and attitude error
+against the trolley's truth is printed beside each INS.
+
+    python benchmarks/trolley_survey.py [--variant ideal_imu] [--step-size 0.005] [--repeat 2]
+                                        [--full] [--out FILE.json]
+"""
+
+from __future__ import annotations
+
+import argparse
+import io
+import json
+import math
+import platform
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+if str(ROOT) not in sys.path:
+    sys.path.insert(0, str(ROOT))
+
+import numpy as np  # noqa: E402
+
+from estimators.ins_observer import StrapdownINS  # noqa: E402
+from experiments.trolley_survey import INCREMENTS, NAV, navigation_errors  # noqa: E402
+
+BAR_S = 10.0  # issue 13: simulated and processed by the INS in <= 10 s wall
+
+
+def simulate(variant: str, step: float | None):
+    """One container run of the survey's FMUs: (seconds, columns -> arrays)."""
+    from experiments.runner import find_experiment, load_system
+    from fmus.cosim.masters import run
+
+    system = load_system(find_experiment("trolley_survey"), variant, step_size=step)
+    system.observers = []  # the INS is timed on its own below
+    t0 = time.perf_counter()
+    result = run(system, master="container", progress=False)
+    seconds = time.perf_counter() - t0
+    return seconds, {c: result.data[:, j] for j, c in enumerate(result.columns)}, system.step_size
+
+
+def errors(nav: np.ndarray, truth: np.ndarray) -> tuple[float, float]:
+    e = navigation_errors(nav, truth)
+    return (float(np.linalg.norm(e["position"], axis=1).max()),
+            float(np.linalg.norm(e["attitude"], axis=1).max()))
+
+
+def best(fn, repeat: int):
+    times, out = [], None
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        out = fn()
+        times.append(time.perf_counter() - t0)
+    return min(times), out
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--variant", default="ideal_imu")
+    ap.add_argument("--step-size", type=float, default=None, help="s (default the SSD's 5 ms)")
+    ap.add_argument("--repeat", type=int, default=2)
+    ap.add_argument("--full", action="store_true", help="also time `railfmu run` with its files")
+    ap.add_argument("--out", type=Path, default=ROOT / "build" / "benchmarks" / "trolley_survey.json")
+    args = ap.parse_args(argv)
+    from fmus.generate.build import DEFAULT_OUT, build_all
+    build_all(DEFAULT_OUT)
+
+    sim_s, sig, dt = min((simulate(args.variant, args.step_size) for _ in range(args.repeat)), key=lambda r: r[0])
+    t = sig["time"]
+    n = t.size - 1
+    inc = np.column_stack([sig[f"imu.{k}"] for k in INCREMENTS])
+    truth = np.column_stack([sig[f"trolley.{k}"] for k in NAV])
+    start = dict(zip(NAV, map(float, truth[0])))
+
+    ins_s, nav = best(lambda: StrapdownINS(dt, **start).run(t, np.empty((t.size, 0)), inc), args.repeat)
+    rows = {"simulation": {"seconds": sim_s, "us_per_step": sim_s / n * 1e6},
+            "INS (StrapdownINS.run)": {"seconds": ins_s, "us_per_step": ins_s / n * 1e6,
+                                       **dict(zip(("position_m", "attitude_rad"), errors(nav, truth)))}}
+    try:
+        import pandas as pd
+        from pyins import strapdown
+    except ImportError:
+        strapdown = None
+    if strapdown is not None:
+        deg = 180.0 / math.pi
+        imu = pd.DataFrame(inc, index=t, columns=["gyro_x", "gyro_y", "gyro_z", "accel_x", "accel_y",
+                                                          "accel_z"])
+        pva = pd.Series({"lat": truth[0, 0] * deg, "lon": truth[0, 1] * deg, "alt": truth[0, 2], "VN": truth[0, 3],
+                         "VE": truth[0, 4], "VD": truth[0, 5], "roll": truth[0, 6] * deg,
+                         "pitch": truth[0, 7] * deg, "heading": truth[0, 8] * deg})
+
+        def theirs():
+            return strapdown.Integrator(pva).integrate(strapdown.compute_increments_from_imu(imu, "increment"))
+
+        strapdown.Integrator(pva).integrate(strapdown.compute_increments_from_imu(imu.iloc[:10], "increment"))
+        py_s, traj = best(theirs, args.repeat)
+        out = traj.to_numpy().copy()
+        out[:, [0, 1, 6, 7, 8]] /= deg
+        rows["python-ins (numba)"] = {"seconds": py_s, "us_per_step": py_s / n * 1e6,
+                                      **dict(zip(("position_m", "attitude_rad"), errors(out, truth)))}
+    if args.full:
+        from experiments.runner import run_experiment
+        with tempfile.TemporaryDirectory() as tmp:
+            t0 = time.perf_counter()
+            m = run_experiment("trolley_survey", args.variant, out=Path(tmp) / "run", master="container",
+                               step_size=args.step_size, progress=False, log=io.StringIO())
+            rows["railfmu run (files, plots)"] = {"seconds": time.perf_counter() - t0, **m["timing_s"],
+                                                  "ins_observer_s": m["observers"]["ins"]["wall_time_s"]}
+    total = sim_s + ins_s
+    print(f"trolley_survey {args.variant}: {n} steps ({t[-1]:g} s at {dt:g} s); fastest of {args.repeat}")
+    print(f"{'':28s} {'s':>7s} {'us/step':>8s} {'pos err m':>10s} {'att err rad':>12s}")
+    for name, r in rows.items():
+        print(f"{name:28s} {r['seconds']:7.2f} {r.get('us_per_step', float('nan')):8.1f} "
+              f"{r.get('position_m', float('nan')):10.2e} {r.get('attitude_rad', float('nan')):12.2e}")
+    print(f"simulation + INS: {total:.2f} s (bar {BAR_S:g} s: {'met' if total <= BAR_S else 'MISSED'})")
+    if "python-ins (numba)" in rows:
+        print(f"INS / python-ins: {ins_s / rows['python-ins (numba)']['seconds']:.1f}x")
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    args.out.write_text(json.dumps({"machine": platform.platform(), "python": platform.python_version(),
+                                    "variant": args.variant, "steps": n, "step_size_s": dt,
+                                    "simulation_plus_ins_s": total, "results": rows}, indent=2))
+    print(f"-> {args.out}")
+    return 0 if total <= BAR_S else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

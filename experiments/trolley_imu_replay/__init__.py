@@ -1,0 +1,85 @@
+"""The trolley survey's strapdown INS offline on a recorded imu.csv, started from and scored against truth.csv.
+
+``SystemStructure.ssd``: a SignalTable FMU plays ``imu.csv`` (the standard form of
+``trolley_survey``: ``time_s, dtheta_x, dtheta_y, dtheta_z, dv_x, dv_y, dv_z``) into the
+free-inertial strapdown INS (:class:`estimators.ins_observer.StrapdownINS`); a second one plays
+``truth.csv``, whose first row is the INS's initial state (settings bound to its channels)
+and against which it is scored, with the metrics and figures of ``trolley_survey``. The IMU
+table's end ends the run. Shipped: the first 15 s of an ideal-IMU ``trolley_survey`` run
+(``record.py``). Your data: ``--set imu.file=/path/imu.csv --set truth.file=/path/truth.csv``
+and ``--step-size`` at your IMU interval (the SSD's comment says more). Variants:
+``recorded`` (the SSD as it is) and ``paper_initial_errors`` (the INS started with the
+0.006 deg tilt and 0.06 deg heading errors of Jiang et al. (2017)).
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+
+from experiments.study_protocol import RunData, Study, observers_md, output
+from experiments.trolley_survey import (ERRORS, INCREMENTS, NAV, UNITS, error_metrics, metric_name,
+                                        navigation_errors)
+
+DEG = math.pi / 180
+#: truth.csv's channels on the truth table: (column, NAV name or None, factor to rad/m/(m/s))
+TRUTH = (("lat_deg", "latitude", DEG), ("lon_deg", "longitude", DEG), ("height_m", "height", 1.0),
+         ("vn", "vn", 1.0), ("ve", "ve", 1.0), ("vd", "vd", 1.0), ("roll_deg", "roll", DEG),
+         ("pitch_deg", "pitch", DEG), ("heading_deg", "heading", DEG), ("distance_m", None, 1.0))
+
+ROLES = {**{f"truth_{c}": output("truth", f"y_{k}") for k, (c, _, _) in enumerate(TRUTH, 1)},
+         "truth_stopped": output("truth", "boolean_1")}
+
+
+def _arrays(run: RunData) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Times, INS estimates (n, 9) and the replayed truth (n, 9) in rad, m, m/s."""
+    t = np.asarray(run.estimates["time"])
+    n = len(t)
+    est = np.column_stack([np.asarray(run.estimates[f"ins.{k}"])[:n] for k in NAV])
+    true = np.column_stack([np.asarray(run.signals[run.roles[f"truth_{c}"]])[:n] * f
+                            for c, name, f in TRUTH if name])
+    return t, est, true
+
+
+class TrolleyImuReplay(Study):
+    """The INS on a replayed imu.csv, scored as ``trolley_survey`` scores it."""
+    default_variant = "recorded"
+    roles = ROLES
+    figures_of_signals = {"imu.png": ("Replayed IMU increments",
+                                      [[(f"imu.y_{k}", c) for k, c in enumerate(INCREMENTS[:3], 1)],
+                                       [(f"imu.y_{k}", c) for k, c in enumerate(INCREMENTS[3:], 4)]])}
+    summary_metrics = tuple(metric_name(k, s) for k in ERRORS for s in ("", "_30s", "_60s")) + ("wall_time_s",)
+
+    def metrics(self, run: RunData) -> dict:
+        t, est, true = _arrays(run)
+        stopped = np.asarray(run.signals[run.roles["truth_stopped"]])[:len(t)]
+        moving = np.flatnonzero(stopped == 0)
+        start = float(t[moving[0] - 1]) if moving.size and moving[0] > 0 else float(t[0])
+        return error_metrics(t, navigation_errors(est, true), start)
+
+    def figures(self, run: RunData, out: Path) -> list[str]:
+        from experiments.plots import figure
+
+        t, est, true = _arrays(run)
+        e = navigation_errors(est, true)
+        axes = [[(f"position {c}", 1e3 * e["position"][:, j], "mm") for j, c in enumerate("NED")],
+                [(f"velocity {c}", 1e3 * e["velocity"][:, j], "mm/s") for j, c in enumerate("NED")],
+                [(f"attitude {c}", np.degrees(e["attitude"][:, j]), "deg") for j, c in
+                 enumerate(("tilt N", "tilt E", "heading"))]]
+        return [figure(out, "ins_errors.png", "Free-inertial INS errors on the replayed IMU (INS minus truth)",
+                       t, "time [s]", axes)]
+
+    def report_md(self, metrics: dict) -> str:
+        L = ["## Free-inertial INS on the replayed IMU, against truth.csv", "",
+             f"Motion starts at {metrics['motion_start_s']:g} s.", "",
+             "| error | whole record | up to 30 s | up to 60 s | final |", "|---|---|---|---|---|"]
+        for kind in ERRORS:
+            L.append(f"| {kind} [{UNITS[kind].replace('_', '/')}] | {metrics[metric_name(kind)]:.4g} | "
+                     f"{metrics[metric_name(kind, '_30s')]:.4g} | {metrics[metric_name(kind, '_60s')]:.4g} | "
+                     f"{metrics[f'ins_{kind}_error_final_{UNITS[kind]}']:.4g} |")
+        return "\n".join(L + ["", observers_md(metrics)])
+
+
+STUDY = TrolleyImuReplay(__doc__.strip().splitlines()[0])

@@ -1,0 +1,460 @@
+"""The trolley survey (Jiang et al. 2017), free-inertial part: experiments/trolley_survey and
+experiments/trolley_imu_replay, and the "Done when" checks of the survey's data.
+
+* ideal IMU: the INS reproduces the trolley's truth to < 0.01 mm and 1e-6 rad over the first
+  120 s (the rest, the first run to the 60 m stop, the clothoid into the 400 m curve at 80 m)
+  at 5, 2.5 and 10 ms; over the whole 700 s run (slow) see ``test_whole_run``: the
+  two-sample coning and sculling of any strapdown INS meet the angular-rate jumps at the
+  element ends (the linear cant ramps, the vertical curves) and leave 3.4e-8 m/s per jump at
+  5 ms; an INS told where the jumps are reproduces the truth to 1.5 um;
+* python-ins's integrator reproduces our truth.csv from our imu.csv (the files, not the FMU);
+* imu.csv and truth.csv are signals.csv's numbers, in the standard form; the replay
+  experiment on them gives the online INS's estimates;
+* the grade variants carry the grade .ssv files whole;
+* Trolley + ImuErrors in libcosim give our numbers;
+* bad input through the CLI: one line, exit 2.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import math
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import fmpy
+import numpy as np
+import pandas as pd
+import pytest
+
+from estimators.strapdown import Strapdown
+from experiments.runner import run_experiment
+from experiments.trolley_survey import NAV, TRUTH_COLUMNS, navigation_errors
+from models import earth
+
+pytestmark = pytest.mark.skipif(shutil.which("gcc") is None or fmpy.platform != "linux64",
+                                reason="needs gcc on linux64")
+
+ROOT = Path(__file__).resolve().parents[1]
+EXP = ROOT / "experiments" / "trolley_survey"
+REPLAY = ROOT / "experiments" / "trolley_imu_replay"
+FAST = 120.0  # s: 10 s rest, the first run to the stop at 60 m, into the second (the clothoid at 80 m)
+BAR_M, BAR_RAD = 0.01e-3, 1e-6  # the issue's bar: 0.01 mm, 1e-6 rad
+DEG = math.pi / 180
+
+
+def railfmu(*args, cwd=None):
+    return subprocess.run([sys.executable, "-m", "experiments.cli", *args], capture_output=True, text=True,
+                          cwd=cwd)
+
+
+def survey_run(out: Path, step: float, stop: float = FAST, variant: str = "ideal_imu", **kw) -> dict:
+    return run_experiment("trolley_survey", variant, out=out, stop_time=stop, step_size=step, master="container",
+                          progress=False, log=io.StringIO(), **kw)
+
+
+@pytest.fixture(scope="module")
+def survey(tmp_path_factory, fmu_dir):
+    """120 s of the ideal-IMU survey at 5 ms: its folder and metrics."""
+    out = tmp_path_factory.mktemp("survey") / "ideal"
+    return out, survey_run(out, 0.005)
+
+
+def truth_array(path: Path) -> tuple[np.ndarray, np.ndarray]:
+    """truth.csv -> times and NAV rows (rad, m, m/s)."""
+    tr = pd.read_csv(path)
+    nav = np.column_stack([tr.lat_deg * DEG, tr.lon_deg * DEG, tr.height_m, tr.vn, tr.ve, tr.vd,
+                           tr.roll_deg * DEG, tr.pitch_deg * DEG, tr.heading_deg * DEG])
+    return tr.time_s.to_numpy(), nav
+
+
+# -- ideal IMU: the numerical floor ------------------------------------------------------------
+
+def check_bar(m: dict) -> None:
+    assert m["ins_position_error_max_mm"] < BAR_M * 1e3, m["ins_position_error_max_mm"]
+    assert m["ins_attitude_error_max_deg"] < BAR_RAD / DEG, m["ins_attitude_error_max_deg"]
+    assert m["ins_velocity_error_max_mm_s"] < 1e-3  # 1 um/s
+
+
+def test_ideal_imu_at_5_ms(survey):
+    """Measured (120 s): 1.0 um position (during the first stop), 1.8e-13 rad, 2.2e-7 mm/s.
+    The metrics and their 30 s / 60 s forms are there."""
+    _, m = survey
+    check_bar(m)
+    assert m["motion_start_s"] == 10.0
+    for kind, unit in (("position", "mm"), ("velocity", "mm_s"), ("attitude", "deg")):
+        whole, at30, at60 = (m[f"ins_{kind}_error_max_{unit}{s}"] for s in ("", "_30s", "_60s"))
+        assert 0 < at30 <= at60 <= whole
+
+
+@pytest.mark.parametrize("step", [0.0025, 0.01])
+def test_ideal_imu_at_other_steps(tmp_path, fmu_dir, step):
+    """The same bar at 2.5 ms and 10 ms communication steps (the Trolley integrates over the
+    step it is given; the INS's interval is the step)."""
+    m = survey_run(tmp_path / "run", step, write_files=False)
+    assert m["step_size_s"] == step
+    check_bar(m)
+
+
+def test_metrics_against_an_independent_reading_of_the_files(survey):
+    """The metrics equal the errors computed here from estimates.csv and truth.csv (to the
+    1e-16 of truth.csv's degrees: 4e-10 m in latitude)."""
+    out, m = survey
+    t, true = truth_array(out / "truth.csv")
+    est = pd.read_csv(out / "estimates.csv")
+    nav = est[[f"ins.{k}" for k in NAV]].to_numpy()
+    rn, re = earth.principal_radii(true[:, 0], true[:, 2])
+    d = np.column_stack([(nav[:, 0] - true[:, 0]) * rn, (nav[:, 1] - true[:, 1]) * re * np.cos(true[:, 0]),
+                         nav[:, 2] - true[:, 2]])
+    assert np.linalg.norm(d, axis=1).max() * 1e3 == pytest.approx(m["ins_position_error_max_mm"], abs=2e-6)
+    upto = t <= 40.0 + 1e-9
+    assert np.linalg.norm(d[upto], axis=1).max() * 1e3 == pytest.approx(m["ins_position_error_max_mm_30s"],
+                                                                      abs=2e-6)
+    assert (np.abs(nav[:, 3:6] - true[:, 3:6]).max() * 1e3
+            <= m["ins_velocity_error_max_mm_s"] * (1 + 1e-6) + 1e-9)
+
+
+def test_an_angular_rate_jump_costs_the_two_sample_ins_a_velocity_step(survey):
+    """Why the whole run misses the 0.01 mm bar (``test_whole_run``): at 80 m (t = 101 s) the
+    cant ramp starts, linear in s, so the roll rate jumps by v 0.1 m / (1.5 m 40 m) = 1.67e-3
+    rad/s. The INS's two-sample coning and sculling take the rates as linear over two
+    intervals; across the jump its sculling term is off by about |d omega| h |dv| / 12 =
+    1.67e-3 0.005 0.049 / 12 = 3.4e-8 m/s, a velocity step that integrates into position.
+    The data are exact there: an INS told the instant (it restarts its two-sample memory with
+    the interval after it) has no step."""
+    out, _ = survey
+    t, true = truth_array(out / "truth.csv")
+    imu = pd.read_csv(out / "imu.csv").to_numpy()
+    k_jump = int(np.flatnonzero(np.isclose(t, 101.0))[0]) + 1  # the first interval after 80 m
+
+    def velocity_step(aware: bool) -> float:
+        ins = Strapdown.from_rph(*true[0, :3], true[0, 3:6], true[0, 6:9], 0.005)
+        ins.prime(imu[0, 1:4], imu[0, 4:7])
+        err = []
+        for k in range(1, k_jump + 40):
+            if aware and k == k_jump:
+                ins.prime(imu[k, 1:4], imu[k, 4:7])
+            ins.update(*imu[k, 1:])
+            if k >= k_jump - 20:
+                err.append(np.array(ins.navigation()[3:6]) - true[k, 3:6])
+        err = np.array(err)
+        return float(np.linalg.norm(err[25:].mean(axis=0) - err[:15].mean(axis=0)))
+
+    plain, aware = velocity_step(False), velocity_step(True)
+    assert 2.5e-8 < plain < 4.5e-8, plain
+    assert aware < 5e-10, aware  # measured 1.6e-10
+
+
+# -- the standard files --------------------------------------------------------------------------
+
+def test_standard_files_are_the_recorded_signals(survey):
+    """imu.csv: the measured increments (ImuErrors' outputs), text for text as signals.csv has
+    them; truth.csv: the trolley's state, angles in degrees, stopped 0/1; the first row is t0."""
+    out, _ = survey
+    with open(out / "imu.csv") as f:
+        imu = list(csv.reader(f))
+    with open(out / "truth.csv") as f:
+        truth = list(csv.reader(f))
+    with open(out / "signals.csv") as f:
+        rows = list(csv.reader(f))
+    head, sig = rows[0], rows[1:]
+    assert imu[0] == ["time_s", "dtheta_x", "dtheta_y", "dtheta_z", "dv_x", "dv_y", "dv_z"]
+    assert tuple(truth[0]) == TRUTH_COLUMNS
+    assert len(imu) == len(truth) == len(rows) == round(FAST / 0.005) + 2
+    for j, name in enumerate(imu[0][1:], 1):
+        col = head.index(f"imu.{name}")
+        assert [r[j] for r in imu[1:]] == [r[col] for r in sig], name
+    assert imu[1] == ["0.0"] + ["0.0"] * 6  # the initial point: no interval yet
+    t, nav = truth_array(out / "truth.csv")
+    s = pd.read_csv(out / "signals.csv")
+    for j, name in enumerate(NAV):
+        assert np.abs(nav[:, j] - s[f"trolley.{name}"]).max() <= 4e-16 * max(1.0, np.abs(nav[:, j]).max()), name
+    assert {r[-1] for r in truth[1:]} == {"0", "1"}
+    assert np.array_equal(pd.read_csv(out / "truth.csv").stopped, s["trolley.stopped"].astype(int))
+
+
+def test_python_ins_reproduces_the_truth_from_the_files(survey, tmp_path, fmu_dir):
+    """python-ins (its own coning and sculling, Coriolis at the interval's start velocity: a
+    first-order error) from imu.csv and the first row of truth.csv, against truth.csv over
+    120 s. Measured: 0.029 mm at 5 ms, 0.0144 mm at 2.5 ms (first order in the step), the
+    Richardson extrapolation 2 x(2.5 ms) - x(5 ms) 0.64 um: below the bar, so the files are
+    right, not only consistent with our INS. Attitude: 5e-12 rad. (Over the whole 700 s run
+    python-ins reaches 0.23 mm at 5 ms, benchmarks/trolley_survey.py; tests/test_trolley.py
+    has its Richardson extrapolation there.)"""
+    from pyins import strapdown
+
+    def pyins_errors(folder: Path):
+        imu = pd.read_csv(folder / "imu.csv", index_col="time_s")
+        imu.columns = ["gyro_x", "gyro_y", "gyro_z", "accel_x", "accel_y", "accel_z"]
+        tr = pd.read_csv(folder / "truth.csv")
+        first = tr.iloc[0]
+        pva = pd.Series({"lat": first.lat_deg, "lon": first.lon_deg, "alt": first.height_m, "VN": first.vn,
+                         "VE": first.ve, "VD": first.vd, "roll": first.roll_deg, "pitch": first.pitch_deg,
+                         "heading": first.heading_deg})
+        ins = strapdown.Integrator(pva)
+        ins.integrate(strapdown.compute_increments_from_imu(imu, "increment"))  # row 0: the interval before
+        traj = ins.trajectory.to_numpy()
+        est = traj.copy()
+        est[:, [0, 1, 6, 7, 8]] *= DEG
+        _, true = truth_array(folder / "truth.csv")
+        return navigation_errors(est, true)
+
+    run25 = tmp_path / "run25"
+    survey_run(run25, 0.0025)
+    e5, e25 = pyins_errors(survey[0]), pyins_errors(run25)
+    e25 = {k: v[::2] for k, v in e25.items()}  # at the 5 ms points
+    p5, p25 = (np.linalg.norm(e["position"], axis=1) for e in (e5, e25))
+    rich = np.linalg.norm(2 * e25["position"] - e5["position"], axis=1)
+    print(f"python-ins over {FAST:g} s: {p5.max() * 1e3:.4f} mm (5 ms), {p25.max() * 1e3:.4f} mm (2.5 ms), "
+          f"Richardson {rich.max() * 1e3:.5f} mm; attitude {np.linalg.norm(e5['attitude'], axis=1).max():.1e} rad")
+    assert p5.max() < 0.04e-3 and p25.max() < 0.02e-3
+    assert 1.7 < p5[-1] / p25[-1] < 2.3  # first order in the step: python-ins's Coriolis term
+    assert rich.max() < 0.2 * BAR_M
+    assert np.linalg.norm(e5["attitude"], axis=1).max() < BAR_RAD
+
+
+# -- the replay of imu.csv -------------------------------------------------------------------------
+
+def test_replay_of_the_survey_files_gives_the_online_estimates(survey, tmp_path):
+    """``railfmu run trolley_imu_replay --set imu.file=... --set truth.file=...`` on the
+    survey's files: the INS started from truth.csv's first row (degrees, converted by the
+    SSD's unit) gives the survey's online estimates to the last bits."""
+    out, m = survey
+    res = railfmu("run", "trolley_imu_replay", "--set", f"imu.file={out / 'imu.csv'}", "--set",
+                  f"truth.file={out / 'truth.csv'}", "--out", str(tmp_path / "replay"))
+    assert res.returncode == 0, res.stderr
+    ours = pd.read_csv(out / "estimates.csv")
+    replayed = pd.read_csv(tmp_path / "replay" / "estimates.csv")
+    assert len(replayed) == len(ours)
+    for k in NAV:
+        a, b = ours[f"ins.{k}"].to_numpy(), replayed[f"ins.{k}"].to_numpy()
+        assert np.abs(a - b).max() <= 1e-14 * max(1.0, np.abs(a).max()), k
+    import json
+    rm = json.loads((tmp_path / "replay" / "metrics.json").read_text())
+    assert rm["early_end"] and rm["end_time_s"] == FAST  # the table's end ended the run
+    assert rm["ins_position_error_max_mm"] == pytest.approx(m["ins_position_error_max_mm"], abs=2e-6)  # degrees
+
+
+def test_shipped_record_replays(tmp_path, fmu_dir):
+    """The shipped 15 s (``railfmu run trolley_imu_replay``), and with the paper's initial
+    attitude errors: 0.06 deg of heading error turns the 0.3 m/s of the first run's speed by
+    0.06 deg, so the position error grows, and the tilt shows as the initial attitude error."""
+    res = railfmu("run", "trolley_imu_replay", "--out", str(tmp_path / "a"))
+    assert res.returncode == 0, res.stderr
+    import json
+    m = json.loads((tmp_path / "a" / "metrics.json").read_text())
+    check_bar(m)
+    res = railfmu("run", "trolley_imu_replay", "--variant", "paper_initial_errors", "--out", str(tmp_path / "b"))
+    assert res.returncode == 0, res.stderr
+    m = json.loads((tmp_path / "b" / "metrics.json").read_text())
+    tilt, heading = 0.006, 0.06
+    assert m["ins_attitude_error_max_deg"] == pytest.approx(math.hypot(math.hypot(tilt, tilt), heading), rel=0.02)
+    assert m["ins_position_error_max_mm"] > 0.01
+
+
+# -- the variants carry whole grades -------------------------------------------------------------
+
+def _ssv(path: Path) -> dict[str, float]:
+    import xml.etree.ElementTree as ET
+    ns = {"ssv": "http://ssp-standard.org/SSP1/SystemStructureParameterValues"}
+    return {p.get("name"): float(p[0].get("value")) for p in ET.parse(path).getroot().iterfind(
+        "ssv:Parameters/ssv:Parameter", ns)}
+
+
+@pytest.mark.parametrize("variant, grade", [("ideal_imu", "ideal"), ("navigation_grade", "navigation_grade"),
+                                            ("tactical_grade", "tactical_grade"), ("mems_grade", "mems_grade")])
+def test_variant_is_the_grade_ssv(variant, grade):
+    from models.imu_errors import GRADES
+    v = _ssv(EXP / "variants" / f"{variant}.ssv")
+    g = _ssv(EXP / "parameters" / f"imu_{grade}.ssv")
+    assert v == {f"imu.{k}": x for k, x in g.items()}
+    if grade in GRADES:
+        assert g == GRADES[grade]
+
+
+def test_navigation_grade_short_run(tmp_path, fmu_dir):
+    """The paper's grade over the first 60 s: the errors are the grade's, far above the
+    ideal IMU's floor (gyro ARW 0.005 deg/sqrt(h) alone tilts the INS by ~6e-5 deg in 60 s)."""
+    m = survey_run(tmp_path / "nav", 0.005, stop=60.0, variant="navigation_grade", write_files=False)
+    assert 1e-6 < m["ins_attitude_error_max_deg"] < 1e-2
+    assert m["ins_position_error_max_mm"] > 0.01
+
+
+# -- observer settings bound to signals --------------------------------------------------------------
+
+def test_bound_settings_survive_export_and_a_value_overrides_them(tmp_path, fmu_dir):
+    from fmus.errors import UserError
+    from fmus.ssp import read_system, write_ssp
+    from fmus.generate.build import DEFAULT_OUT
+
+    system = read_system(REPLAY, fmu_dirs=[DEFAULT_OUT])
+    spec = system.observers[0]
+    assert spec.setting_signals["latitude"] == "truth.y_1" and "latitude" not in spec.settings
+    write_ssp(system, tmp_path / "r.ssp")
+    again = read_system(tmp_path / "r.ssp").observers[0]
+    assert again.setting_signals == spec.setting_signals and again.settings == spec.settings
+    given = read_system(REPLAY, fmu_dirs=[DEFAULT_OUT], overrides={"ins": {"latitude": 0.5}}).observers[0]
+    assert given.settings["latitude"] == 0.5 and "latitude" not in given.setting_signals
+    bad = (REPLAY / "SystemStructure.ssd").read_text().replace(
+        '<rf:Setting name="height" connector="truth.y_3"/>',
+        '<rf:Setting name="height" connector="truth.y_3" value="1"/>')
+    folder = tmp_path / "bad"
+    shutil.copytree(REPLAY, folder)
+    (folder / "SystemStructure.ssd").write_text(bad)
+    with pytest.raises(UserError, match="Setting 'height': give a value or a connector, not both"):
+        read_system(folder, fmu_dirs=[DEFAULT_OUT])
+
+
+# -- libcosim ------------------------------------------------------------------------------------
+
+def test_trolley_and_imu_errors_in_libcosim(tmp_path, fmu_dir):
+    """``railfmu export trolley_survey --variant navigation_grade`` run by libcosim (2 s at
+    5 ms): the trolley's outputs are ours (its clock is integer nanoseconds: to 1e-12 of each
+    signal's range), and the IMU errors ImuErrors adds (its output minus the input it held over
+    the step) are ours to 1e-18. libcosim reads ImuErrors' outputs before the next transfer, so
+    its input there is the trolley's increment one step earlier than in our recorder (the
+    Jacobi ordering seen from outside, tests/test_libcosim.py)."""
+    pytest.importorskip("libcosimpy", reason="libcosimpy is not installed")
+    from libcosimpy.CosimEnums import CosimVariableType
+    from libcosimpy.CosimExecution import CosimExecution
+    from libcosimpy.CosimLogging import CosimLogLevel, log_output_level
+    from libcosimpy.CosimObserver import CosimObserver
+
+    from fmus.cosim.masters import run as run_master
+    from fmus.ssp import read_system
+
+    ssp = tmp_path / "survey.ssp"
+    res = railfmu("export", "trolley_survey", "--variant", "navigation_grade", "--stop-time", "2", "-o", str(ssp))
+    assert res.returncode == 0, res.stderr
+    system = read_system(ssp)
+    ours = run_master(system, master="jacobi", progress=False)
+    col = {c: ours.data[:, j] for j, c in enumerate(ours.columns)}
+    n = system.n_steps
+    log_output_level(CosimLogLevel.WARNING)
+    ex = CosimExecution.from_ssp_file(str(ssp), step_size=round(system.step_size * 1e9))
+    index = {s.name.decode(): s.index for s in ex.slave_infos()}
+    obs = CosimObserver.create_time_series(buffer_size=n + 10)
+    assert ex.add_observer(obs)
+    vrs = {c.name: {v.name: v.valueReference for v in fmpy.read_model_description(str(c.fmu)).modelVariables}
+           for c in system.components}
+    names = [("trolley", k) for k in ("dtheta_x", "dtheta_y", "dtheta_z", "dv_x", "dv_y", "dv_z", *NAV)]
+    names += [("imu", k) for k in ("dtheta_x", "dtheta_y", "dtheta_z", "dv_x", "dv_y", "dv_z")]
+    for comp, var in names:
+        assert obs.start_time_series(index[comp], vrs[comp][var], CosimVariableType.REAL)
+    assert ex.simulate_until(n * round(system.step_size * 1e9))
+
+    def lib(comp, var):
+        i, vr = index[comp], vrs[comp][var]
+        _, _, x0 = obs.time_series_real_samples(i, vr, from_step=0, sample_count=2)
+        _, _, x = obs.time_series_real_samples(i, vr, from_step=1, sample_count=n)
+        return np.array([x0[0], *x])
+
+    for var in ("dtheta_x", "dtheta_y", "dtheta_z", "dv_x", "dv_y", "dv_z", *NAV):
+        a, b = lib("trolley", var), col[f"trolley.{var}"]
+        assert np.abs(a - b).max() <= 1e-12 * max(np.ptp(b), 1e-300) + 1e-18, var
+    for var in ("dtheta_x", "dtheta_y", "dtheta_z", "dv_x", "dv_y", "dv_z"):
+        ideal_lib = lib("trolley", var)
+        err_lib = lib("imu", var)[2:] - ideal_lib[1:-1]  # libcosim: the input held is one step older
+        err_ours = col[f"imu.{var}"][2:] - col[f"trolley.{var}"][2:]
+        assert np.abs(err_ours).max() > 0  # the grade adds errors
+        assert np.abs(err_lib - err_ours).max() <= 1e-18 + 1e-12 * np.abs(err_ours).max(), var
+
+
+# -- bad input: one line, exit 2 -----------------------------------------------------------------
+
+GOOD_TRACK = ("kind,start_m,end_m,radius_m,cant_mm,gradient_permille\n"
+              "straight,0,50,,,\nstraight,50,100,,,\ngrade,0,100,,,0\n")
+
+
+def _bad_track(tmp_path: Path) -> list[str]:
+    p = tmp_path / "track.csv"
+    p.write_text(GOOD_TRACK.replace("straight,50,100", "straight,40,100"))
+    return ["run", "trolley_survey", "--set", f"trolley.track_file={p}", "--stop-time", "1"]
+
+
+def _bad_grade(tmp_path: Path) -> list[str]:
+    """A copy of the experiment whose navigation grade has a negative accelerometer noise."""
+    folder = tmp_path / "survey"
+    shutil.copytree(EXP, folder, ignore=shutil.ignore_patterns("__pycache__"))
+    grade = folder / "variants" / "navigation_grade.ssv"
+    text = grade.read_text()
+    bad = text.replace('name="imu.accel_noise_ug_sqrt_hz"><ssv:Real value="10.0"',
+                       'name="imu.accel_noise_ug_sqrt_hz"><ssv:Real value="-10.0"')
+    assert bad != text
+    grade.write_text(bad)
+    return ["run", str(folder), "--variant", "navigation_grade", "--stop-time", "1"]
+
+
+def _bad_imu_csv(tmp_path: Path) -> list[str]:
+    p = tmp_path / "imu.csv"
+    lines = (REPLAY / "resources" / "imu.csv").read_text().splitlines()[:50]
+    p.write_text("\n".join(",".join(line.split(",")[:6]) for line in lines) + "\n")  # no dv_z
+    return ["run", "trolley_imu_replay", "--set", f"imu.file={p}"]
+
+
+@pytest.mark.parametrize("make, message", [
+    (_bad_track, "start_m"),
+    (lambda tmp: ["run", "trolley_survey", "--set", "trolley.stop_spacing=-60", "--stop-time", "1"], "stop_spacing"),
+    (_bad_grade, "accel_noise_ug_sqrt_hz"),
+    (_bad_imu_csv, "dv_z"),
+], ids=["track-non-monotonic", "negative-stop-spacing", "grade-negative-noise", "imu-csv-missing-column"])
+def test_bad_input_is_one_line_and_exit_2(tmp_path, fmu_dir, make, message):
+    res = railfmu(*make(tmp_path), "--out", str(tmp_path / "out"))
+    errors = [line for line in res.stderr.splitlines() if not line.startswith("running ")]
+    assert res.returncode == 2, res.stderr
+    assert len(errors) == 1 and errors[0].startswith("railfmu: error: ") and message in errors[0], res.stderr
+    assert "Traceback" not in res.stderr
+
+
+# -- the whole run (slow) ------------------------------------------------------------------------
+
+@pytest.mark.slow
+def test_whole_run(tmp_path, fmu_dir):
+    """The whole 600 m, 700 s ideal-IMU run at 5, 2.5 and 10 ms. Measured: position 0.0386,
+    0.00966 and 0.154 mm (second order in the step), attitude 1.3e-11, 3.3e-12 and 5.3e-11
+    rad, velocity 1.0e-7, 2.6e-8, 4.2e-7 m/s. The position misses the issue's 0.01 mm at 5
+    and 10 ms because of the eight angular-rate jumps at element ends met in motion
+    (``test_an_angular_rate_jump_...``): 3.4e-8 m/s at each cant-ramp end of the 400 m
+    curve, 2.0e-8 at the 600 m curve's, 2.7e-9 and 3.1e-9 at the vertical curves', each
+    integrating for the rest of the run. The data are exact: the same INS restarting its
+    two-sample memory after each of those instants stays within 1.5 um and 5e-13 rad over
+    the whole run; and the same track without cant (no roll-rate jumps; the vertical curves'
+    pitch-rate jumps remain) meets the bar at 5 ms as it is: 0.0018 mm, 1e-12 rad."""
+    from models.track_geometry import TrackGeometry
+
+    results = {}
+    for step in (0.005, 0.0025, 0.01):  # the files of the 5 ms run only
+        out = tmp_path / f"run{step}"
+        m = survey_run(out, step, stop=700.0, write_files=step == 0.005)
+        results[step] = m
+        assert m["ins_attitude_error_max_deg"] < BAR_RAD / DEG
+    print({h: (m["ins_position_error_max_mm"], m["ins_attitude_error_max_deg"] * DEG) for h, m in results.items()})
+    assert results[0.005]["ins_position_error_max_mm"] < 0.045
+    assert results[0.0025]["ins_position_error_max_mm"] < BAR_M * 1e3
+    assert results[0.01]["ins_position_error_max_mm"] < 0.18
+    out = tmp_path / "run0.005"
+    t, true = truth_array(out / "truth.csv")
+    imu = pd.read_csv(out / "imu.csv").to_numpy()
+    dist = pd.read_csv(out / "truth.csv").distance_m.to_numpy()
+    after = {int(np.flatnonzero(dist > s)[0]) for s in TrackGeometry().kinks if 0 < s < dist[-1]}
+    ins = Strapdown.from_rph(*true[0, :3], true[0, 3:6], true[0, 6:9], 0.005)
+    ins.prime(imu[0, 1:4], imu[0, 4:7])
+    nav = [ins.navigation()]
+    for k in range(1, len(imu)):
+        if k in after:
+            ins.prime(imu[k, 1:4], imu[k, 4:7])
+        ins.update(*imu[k, 1:])
+        nav.append(ins.navigation())
+    e = navigation_errors(np.array(nav), true)
+    assert np.linalg.norm(e["position"], axis=1).max() < BAR_M
+    assert np.linalg.norm(e["attitude"], axis=1).max() < BAR_RAD
+    table = (ROOT / "models" / "data" / "trolley_track.csv").read_text()
+    no_cant = table.replace(",400,100,", ",400,,").replace(",600,60,", ",600,,")
+    assert no_cant != table
+    (tmp_path / "no_cant.csv").write_text(no_cant)
+    m = survey_run(tmp_path / "no_cant", 0.005, stop=700.0, write_files=False,
+                   sets={"trolley": {"track_file": str(tmp_path / "no_cant.csv")}})
+    check_bar(m)
