@@ -73,7 +73,7 @@ def make_observer(spec: ObserverSpec, step_size: float, where: str, system: Syst
         settings["process"] = process
     try:
         obs = cls(period, **settings)
-    except (TypeError, ValueError) as exc:
+    except (TypeError, ValueError, OSError) as exc:  # OSError: a file a setting names (a line profile)
         if process is not None:
             process.close()
         raise UserError(f"{label}: bad settings: {exc}") from None

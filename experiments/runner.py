@@ -94,10 +94,13 @@ def load_system(exp: Experiment, variant: str | None, sets: dict | None = None, 
 def run_experiment(name: str, variant: str | None = None, out: Path | str | None = None,
                    master: str = "jacobi", sets: dict | None = None, seed: int | None = None,
                    stop_time: float | None = None, step_size: float | None = None,
-                   progress: bool = True, log=sys.stderr, write_files: bool = True) -> dict:
+                   progress: bool = True, log=sys.stderr, write_files: bool = True,
+                   series: bool = False) -> dict:
     """Run one variant; writes signals.csv, estimates.csv, metrics.json, plots, report.md into
     ``out`` and returns the metrics. With ``write_files=False`` (a Monte Carlo member) it
-    writes nothing and imports no plotting: the metrics are the result."""
+    writes nothing and imports no plotting: the metrics are the result. ``series``: the
+    returned metrics carry the study's per-run arrays under ``"series"`` (not in metrics.json)
+    for its Monte Carlo figures (:meth:`Study.series`)."""
     from fmus.cosim.masters import MASTERS, run
     from fmus.cosim.recorder import CsvRecorder
 
@@ -166,9 +169,13 @@ def run_experiment(name: str, variant: str | None = None, out: Path | str | None
     # where a run's time goes (benchmarks/overhead.py): stepping includes the online observers
     metrics["timing_s"] = {"setup": setup_s, "stepping": result.wall_time_s,
                            "study_metrics": time.perf_counter() - t_study}
+    arrays = exp.study.series(RunData(signals, estimates, metrics, roles)) if series else {}
+    if write_files:
+        (out / "metrics.json").write_text(json.dumps(metrics, indent=2, default=_json_default) + "\n")
+    if arrays:
+        metrics = {**metrics, "series": arrays}
     if not write_files:
         return metrics
-    (out / "metrics.json").write_text(json.dumps(metrics, indent=2, default=_json_default) + "\n")
     files = exp.study.files(RunData(signals, estimates, metrics, roles), out)
 
     from .plots import plot_estimates, plot_signals, units_of

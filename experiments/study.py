@@ -67,11 +67,13 @@ def summarise(runs: dict) -> dict[str, dict[str, float]]:
     return {k: statistics([f[k] for f in flat if k in f]) for k in keys}
 
 
-def _run_member(name: str, variant: str, out: str | None, master: str, overrides: dict) -> dict:
-    """Worker task: one run, output captured (workers have no terminal); ``out`` None writes nothing."""
+def _run_member(name: str, variant: str, out: str | None, master: str, overrides: dict,
+                series: bool = False) -> dict:
+    """Worker task: one run, output captured (workers have no terminal); ``out`` None writes
+    nothing; ``series``: the metrics carry the study's per-run arrays (Monte Carlo figures)."""
     log = io.StringIO()
     return run_experiment(name, variant, out, master=master, progress=False, log=log,
-                          write_files=out is not None, **overrides)
+                          write_files=out is not None, series=series, **overrides)
 
 
 def _eta(elapsed: float, done: int, total: int) -> str:
@@ -127,7 +129,7 @@ def run_study(name: str, out: Path | str | None = None, scheduler: str | None = 
             else f"{len(selected)} variants"
         print(f"study {exp.name}: {what} on {client.scheduler.address}", file=log)
         futures = {client.submit(_run_member, target, v, member_out(v, s), master, {**overrides, "seed": s},
-                                 key=f"{exp.name}-{v}-{s}", pure=False): (v, s)
+                                 monte_carlo, key=f"{exp.name}-{v}-{s}", pure=False): (v, s)
                    for v in selected for s in seeds}
         results: dict[tuple[str, int | None], dict] = {}
         for i, fut in enumerate(as_completed(futures), 1):
@@ -145,11 +147,14 @@ def run_study(name: str, out: Path | str | None = None, scheduler: str | None = 
             cluster.close()
     md = [f"# Study {exp.name}", "", exp.description, ""]
     if monte_carlo:
-        table = {}
+        table, series = {}, {}
         for v in selected:
+            series[v] = {s: results[v, s].pop("series", {}) for s in seeds}
             member_runs = {s: results[v, s] for s in seeds}
             table[v] = {"runs": member_runs, "summary": summarise(member_runs)}
         md.append(exp.study.summary_md({v: t["summary"] for v, t in table.items()}, runs))
+        plots = exp.study.study_figures(table, series, out)
+        md += ["", *[f"![{p}]({p})" for p in plots], ""] if plots else []
         md += ["", "Each run's files are in <variant>/seed_<seed>/." if keep_runs else
                "Members wrote no files (--keep-runs keeps each run's signals, plots and report)."]
     else:

@@ -149,6 +149,19 @@ class Study:
         """The study's own figures written into ``out``; their file names."""
         return []
 
+    def series(self, run: RunData) -> dict[str, np.ndarray]:
+        """Compact per-run arrays a Monte Carlo member hands back for :meth:`study_figures`
+        (members write no files): e.g. the speed at each GNSS fix. Default: none. Keep them
+        small (float32, at a measurement rate): every member's travel to the client."""
+        return {}
+
+    def study_figures(self, table: dict, series: dict[str, dict[int, dict[str, np.ndarray]]],
+                      out: Path) -> list[str]:
+        """Figures over the Monte Carlo members, written into ``out``: ``table`` is table.json's
+        ``{variant: {"runs": {seed: metrics}, "summary": ...}}``, ``series`` each member's
+        :meth:`series` as ``{variant: {seed: arrays}}``. Default: none."""
+        return []
+
     def report_md(self, metrics: dict) -> str:
         """The study's section of report.md (default: each observer's raw error)."""
         return observers_md(metrics)

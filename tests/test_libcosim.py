@@ -233,6 +233,10 @@ def _feedthrough(md) -> set[str]:
     return out
 
 
+# a replayed GNSS log has a fix every 10 s: 2 s would show no change
+EXCHANGE_STOP = {"train_resistance_measured": 30.0}
+
+
 def _exchange_cases():
     from experiments.runner import experiment_names, find_experiment
 
@@ -251,11 +255,12 @@ def test_exported_ssp_runs_in_libcosim_like_our_jacobi_master(tmp_path, experime
     from fmus.ssp import read_system
 
     ssp = tmp_path / f"{experiment}_{variant}.ssp"
+    stop = EXCHANGE_STOP.get(experiment, 2.0)
     res = subprocess.run([sys.executable, "-m", "experiments.cli", "export", experiment, "--variant", variant,
-                          "--stop-time", "2", "-o", str(ssp)], capture_output=True, text=True)
+                          "--stop-time", f"{stop:g}", "-o", str(ssp)], capture_output=True, text=True)
     assert res.returncode == 0, res.stderr
     system = read_system(ssp)  # the archive alone: its FMUs are inside
-    assert system.stop_time == 2.0
+    assert system.stop_time == stop
     step_ns = round(system.step_size * 1e9)
     n_steps = system.n_steps
 
@@ -295,7 +300,8 @@ def test_exported_ssp_runs_in_libcosim_like_our_jacobi_master(tmp_path, experime
                if set(_outputs(c.fmu)) - _feedthrough(read_model_description(str(c.fmu)))}
     assert {c for c, _, _ in compared} == has_own
     print(f"worst deviation from our Jacobi master: {max(worst.values()):.2e} of range ({len(worst)} signals)")
-    assert len(worst) >= 3 and max(worst.values()) <= RTOL, worst
+    # at least two signals that vary (a train run's own outputs are its two states, s and v)
+    assert len(worst) >= 2 and max(worst.values()) <= RTOL, worst
 
 
 def _outputs(fmu) -> list[str]:

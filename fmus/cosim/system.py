@@ -176,11 +176,22 @@ def read_model(fmu: Path | str, where: str):
     a missing file, an unreadable or non-FMI-2.0-CS FMU, or one without a binary for this
     platform and without ``sources/``. An FMU with ``sources/`` but no binary is compiled once
     (``fmpy.build.build_platform_binary``) into a cached copy, whose path is returned."""
-    from fmpy import read_model_description
-
     fmu = Path(fmu)
     if not fmu.is_file():
         raise UserError(f"{where}: FMU {fmu} not found (run `railfmu build`)")
+    st = fmu.stat()
+    key = (str(fmu.resolve()), st.st_mtime_ns, st.st_size)
+    if key not in _MODELS:  # once per process and FMU file: every Monte Carlo member reads the same
+        _MODELS[key] = _read_model(fmu, where)
+    return _MODELS[key]
+
+
+_MODELS: dict[tuple[str, int, int], tuple] = {}
+
+
+def _read_model(fmu: Path, where: str):
+    from fmpy import read_model_description
+
     try:
         md = read_model_description(str(fmu))
     except Exception as exc:  # noqa: BLE001 - fmpy raises anything from BadZipFile to ValidationError

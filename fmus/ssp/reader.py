@@ -83,6 +83,7 @@ __all__ = ["list_variants", "read_system", "validate_ssp", "write_ssp"]
 FMU_TYPE = "application/x-fmu-sharedlibrary"
 PARAMETER_SET = "application/x-ssp-parameter-set"
 RESOURCES = "resources/"  # SSP 1.0: an SSP's own files (FMUs, and any file a parameter names)
+PARAMETERS = "org.railfmu.parameters"
 RECORDER, OBSERVERS, EXPERIMENT, OSP = ("org.railfmu.recorder", "org.railfmu.observers",
                                         "org.railfmu.experiment", "com.opensimulationplatform")
 
@@ -177,6 +178,7 @@ class _Reader:
         self.ssd_units = Units(from_ssc(self.doc.find("ssd:Units", NS)))
         self.comps: dict[str, _Comp] = {}
         self._mds: dict[Path, object] = {}
+        self.aliases: dict[str, tuple[list[tuple[str, str, str]], str]] = {}
 
     def at(self, el) -> str:
         return f"{self.file}:{el.sourceline}"
@@ -194,6 +196,7 @@ class _Reader:
             self._set(*self._split(v))
         record, observers = self._annotations()
         self.observers = {o.name: o for o in observers}
+        self._aliases()
         if variant is not None:
             self._variant(variant)
         self._overrides(overrides)
@@ -452,23 +455,99 @@ class _Reader:
             raise UserError(f"{file}: variant file not found")
         shown = self.root.show(file)
         for v in read_parameter_set(parse_checked(file, "ssv", shown), shown, self.ssd_units):
-            if not self._observer_setting(v.name, v.value):
+            if not self._alias(v.name, v.value, v.where) and not self._observer_setting(v.name, v.value, v.where):
                 self._set(*self._split(v))
 
-    def _observer_setting(self, name: str, value) -> bool:
+    def _observer_setting(self, name: str, value, where: str = "") -> bool:
         """Our extension: a variant or ``--set`` name ``observer.setting`` (an observer of the
         railfmu annotation, not a component) overrides that observer's setting, e.g. the
-        filter's conicity in a robustness variant. Other tools see no such component."""
+        filter's conicity in a robustness variant. Other tools see no such component.
+        ``observer.samplePeriod`` sets its sample period (s), e.g. to follow a faster GNSS."""
         obs, dot, setting = name.partition(".")
         if not dot or obs in self.comps or obs not in self.observers:
             return False
-        self.observers[obs].settings[setting] = _setting(str(value)) if isinstance(value, str) else value
-        self.observers[obs].setting_signals.pop(setting, None)  # a value given on purpose wins
+        spec = self.observers[obs]
+        if setting == "samplePeriod":
+            try:
+                period = float(value)
+            except (TypeError, ValueError):
+                period = math.nan
+            if not (period > 0 and math.isfinite(period)):
+                raise UserError(f"{where or name}: samplePeriod {value!r} must be a positive number of seconds")
+            spec.period = period
+            return True
+        spec.settings[setting] = _setting(str(value)) if isinstance(value, str) else value
+        spec.setting_signals.pop(setting, None)  # a value given on purpose wins
+        return True
+
+    def _aliases(self) -> dict[str, tuple[list[tuple[str, str, str]], str]]:
+        """Our extension (annotation ``org.railfmu.parameters``): a system parameter with one
+        name that sets several targets, e.g. the line profile that the train, the driver and
+        every observer read::
+
+            <rf:Parameter name="line.file" value="resources/line.csv">
+              <rf:Target connector="train.line_file"/>  <rf:Target setting="ukf_paper.line_file"/>
+
+        A variant or ``--set line.file=...`` sets every target; ``value`` (optional) is applied
+        with the system-level bindings. A String ``resources/...`` names a file of the SSP for
+        an observer setting too. Returns ``{name: ([(kind, owner, name)], where)}``."""
+        out: dict = {}
+        a = self._annotation(self.system, PARAMETERS)
+        for el in a.iterfind("rf:Parameters/rf:Parameter", NS) if a is not None else []:
+            name, where = el.get("name") or "", f"{self.at(el)}: Parameter {el.get('name')!r}"
+            if "." not in name or name.partition(".")[0] in self.comps or name.partition(".")[0] in self.observers:
+                raise UserError(f"{where}: the name must be group.parameter and the group no component or observer")
+            targets = []
+            for t in el.iterfind("rf:Target", NS):
+                ref, setting = t.get("connector"), t.get("setting")
+                if bool(ref) == bool(setting):
+                    raise UserError(f"{self.at(t)}: Target needs one of connector= or setting=")
+                owner, _, param = (ref or setting).partition(".")
+                if ref:
+                    self._settable(self._comp_of(ref, self.at(t)), param, f"{self.at(t)}: Target {ref!r}")
+                elif owner not in self.observers:
+                    raise UserError(f"{self.at(t)}: Target setting {setting!r}: no Observer {owner!r}")
+                targets.append(("connector" if ref else "setting", owner, param))
+            if not targets:
+                raise UserError(f"{where}: no rf:Target")
+            out[name] = (targets, where)
+        self.aliases = out
+        for el in a.iterfind("rf:Parameters/rf:Parameter", NS) if a is not None else []:
+            if el.get("value") is not None:
+                self._alias(el.get("name"), el.get("value"), f"{self.at(el)}: Parameter {el.get('name')!r}")
+        return out
+
+    def _comp_of(self, ref: str, where: str) -> _Comp:
+        comp = self.comps.get(ref.partition(".")[0])
+        if comp is None:
+            raise UserError(f"{where}: no component {ref.partition('.')[0]!r}; {self.known()}")
+        return comp
+
+    def _alias(self, name: str, value, where: str) -> bool:
+        """Set every target of the system parameter ``name`` (:meth:`_aliases`); False if none."""
+        if name not in self.aliases:
+            return False
+        targets, _ = self.aliases[name]
+        for kind, owner, param in targets:
+            if kind == "connector":
+                comp = self.comps[owner]
+                var = self._settable(comp, param, where)
+                comp.params[param] = self._resource(var, from_cli(value, var, where), where)
+            else:
+                if isinstance(value, str) and value.startswith(RESOURCES):
+                    path = self.root.resolve(value, where)
+                    if not path.is_file():
+                        raise UserError(f"{where}: {value} not found in the SSP ({self.root.show(path)})")
+                    value = str(path.resolve())
+                self.observers[owner].settings[param] = _setting(str(value)) if isinstance(value, str) else value
+                self.observers[owner].setting_signals.pop(param, None)
         return True
 
     def _overrides(self, overrides: dict) -> None:
         for cname, values in overrides.items():
-            values = {k: v for k, v in values.items() if not self._observer_setting(f"{cname}.{k}", v)}
+            values = {k: v for k, v in values.items()
+                      if not self._alias(f"{cname}.{k}", v, f"--set {cname}.{k}")
+                      and not self._observer_setting(f"{cname}.{k}", v, f"--set {cname}.{k}")}
             if not values:
                 continue
             comp = self.comps.get(cname)

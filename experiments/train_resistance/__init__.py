@@ -1,0 +1,405 @@
+"""Train running resistance from GNSS with the UKF of Cunillera et al. (2022), on simulated runs with ground truth.
+
+``SystemStructure.ssd``: the Driver (manual driving, style drawn from the run's seed) drives
+the TrainLongitudinal FMU (eqs. 1-2) over the 32,103 m line; the GnssReceiver gives position
+and speed fixes (10 s, 4 m, 1 km/h) with a valid flag; the run's true Davis coefficients are
+the published ones times per-run factors N(1, 0.1^2) (a SensorNoise held over the run). Every
+observer of the SSD (``ukf_paper``: the paper's UKF as written) estimates s, v, r0-r2 from the
+fixes. Variants: ``standard`` (the paper's 10 s GNSS), ``gnss_1hz``, ``resistance_drift`` (r2
+rising +30 % per 1500 s, a headwind), ``heavy_load`` (100 % load; the observers start from the
+35 %-load values). ``railfmu study train_resistance --runs 67`` gives the paper's 67-run
+statistics (its Figs. 2, 4, 7, 8, 9) with the ground truth beside them.
+
+Metrics (``metrics.json``), per estimator (every observer with outputs s, v, r0, r1, r2),
+an object under its name::
+
+    speed_rmse_kmh, position_rmse_m   rms at the GNSS fixes after the first (the initial state)
+                                      against the train's true v, s
+    resistance_rel_error              rms over v = 40, 41, ..., 140 km/h of (r^(v) - r(v)) / r(v),
+                                      r^ from the estimates at the end of the run, r the true
+                                      resistance at the end of the run (eq. 2)
+    r0_rel_error, r1_rel_error, r2_rel_error   (r^_i - r_i) / r_i at the end, signed
+    r0_final, r1_final, r2_final      the final estimates (SI)
+    seconds                           the estimator's wall time in the run
+
+and ``truth``: the run's true r0-r2 at the end, the driver's style (cruise target, brake
+rate per ATB-EG step, cycles), the run time, top speed, and from the driver's regime the
+shares of traction, cruising, coasting and braking in the run time and the final coast and
+brake durations (the quantities of the paper's Figs. 3 and 7).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from experiments.study_protocol import RunData, Study, observers_md, output, parameter, truth
+from fmus.errors import UserError
+
+KMH = 1.0 / 3.6
+DEFAULT_VARIANT = "standard"
+REFERENCE = "ukf_paper"  # the observer whose truth bindings name the train's s, v, r0-r2
+#: the resistance_rel_error speed grid: 40-140 km/h, 1 km/h
+SPEED_GRID = np.arange(40.0, 141.0, 1.0) * KMH
+REGIMES = {0: "standstill", 1: "traction", 2: "cruising", 3: "coasting", 4: "braking"}
+REGIME_COLOURS = {0: "0.6", 1: "k", 2: "C0", 3: "C4", 4: "C3"}  # the paper's Fig. 6: black, blue, purple, red
+ATB_EG = ("> 130", "130-80", "80-60", "60-40", "< 40")  # km/h, the driver's brake_rate_1..5
+ESTIMATES = ("s", "v", "r0", "r1", "r2")
+
+ROLES = {
+    "s": truth(REFERENCE, "s"), "v": truth(REFERENCE, "v"),
+    "r0": truth(REFERENCE, "r0"), "r1": truth(REFERENCE, "r1"), "r2": truth(REFERENCE, "r2"),
+    "fix": output("gnss", "valid"), "gnss_position": output("gnss", "position"),
+    "gnss_speed": output("gnss", "speed"), "gnss_period": parameter("gnss", "sample_period"),
+    "regime": output("driver", "regime"), "cruise_target": output("driver", "cruise_target"),
+    "cycles": output("driver", "cycles"), "coasting_point": output("driver", "coasting_point"),
+    "traction_fraction": output("driver", "traction_fraction"),
+    **{f"brake_rate_{k}": output("driver", f"brake_rate_{k}") for k in range(1, 6)},
+    "acceleration": output("train", "acceleration"), "effort": output("train", "effort_specific"),
+    "power": output("train", "power"), "line_term": output("train", "gradient_specific"),
+    "tare_mass": parameter("train", "tare_mass"), "load_mass": parameter("train", "load_mass"),
+    "gamma": parameter("train", "rotating_mass_factor"), "max_power": parameter("train", "max_power"),
+    "max_traction_force": parameter("train", "max_traction_force"),
+    "max_deceleration": parameter("train", "max_deceleration"),
+}
+
+PLOTS = {
+    "run.png": ("The run: speed, driver's regime, line", [
+        [("v", "true speed"), ("gnss_speed", "GNSS speed")],
+        [("regime", "driver's regime (0 standstill .. 4 braking)")],
+        [("line_term", "line term g(s)")]]),
+}
+
+#: what Cunillera et al. (2022) publish for their 67 NS runs (VIRM-VI, Eindhoven - 's-Hertogenbosch)
+PAPER = {
+    "r0_bounds": "0.0072-0.00738 N/kg besides outliers (Fig. 4; VIRM-VI, manufacturer value near the upper bound)",
+    "above_140": 0.12, "coast_min": (2.5, 10.0), "brake_cv": 0.20, "coast_cv": 0.30,
+    "shares": {"traction": 0.164, "cruising": 0.17, "coasting": 0.57, "braking": 0.093},
+    "linear_share_max": 0.11, "quadratic_share_max": 0.76,
+}
+
+
+def estimators_of(estimates: dict) -> list[str]:
+    """Every observer that estimates s, v, r0, r1, r2 (online: one row per recorded row)."""
+    names = [c[:-3] for c in estimates if c.endswith(".r0")]
+    n = len(estimates["time"])
+    return [o for o in names if all(len(estimates.get(f"{o}.{e}", ())) == n for e in ESTIMATES)]
+
+
+def resistance(r: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Eq. 2: r0 + r1 v + r2 v^2 (N/kg) for coefficients ``r = (r0, r1, r2)``."""
+    return r[0] + r[1] * v + r[2] * v * v
+
+
+def resistance_rel_error(r_hat: np.ndarray, r_true: np.ndarray, grid: np.ndarray = SPEED_GRID) -> float:
+    """rms over ``grid`` (m/s) of (r^(v) - r(v)) / r(v)."""
+    e = (resistance(r_hat, grid) - resistance(r_true, grid)) / resistance(r_true, grid)
+    return float(np.sqrt(np.mean(e * e)))
+
+
+def mass_effective(roles: dict) -> float:
+    """gamma (m_tare + m_load), kg: the train's parameters as the run has them."""
+    return float(roles["gamma"]) * (float(roles["tare_mass"]) + float(roles["load_mass"]))
+
+
+def regime_scores(run: RunData, name: str, fixes: np.ndarray) -> tuple[dict, dict]:
+    """One estimator's driving regimes and features (Cunillera et al. (2022) §3.2-3.3, by
+    :func:`estimators.driving_regimes.score`) at the GNSS fix rows ``fixes``: the issue's
+    ``regime_accuracy``, ``max_power_rel_error``, ``max_effort_rel_error``,
+    ``cruise_speed_error_kmh``, ``brake_rate_error`` (five, per ATB-EG step, None where the
+    run has no braking fix there; also as ``brake_rate_error_step`` by step for the study's
+    summary), the recognised regimes' ``regime_share`` of the running time and the
+    ``features``; and the features' dict with its samples (the figures')."""
+    from estimators.driving_regimes import REGIME_NAMES, score
+
+    sig, est, roles = run.signals, run.estimates, run.roles
+    t = np.asarray(est["time"])[fixes]
+    style = {k: float(sig[roles[k]][0]) for k in ("cruise_target", "traction_fraction",
+                                                  *(f"brake_rate_{j}" for j in range(1, 6)))}
+    train = {k: float(roles[k]) for k in ("max_power", "max_traction_force", "tare_mass", "load_mass")}
+    train["rotating_mass_factor"] = float(roles["gamma"])
+    m, feats = score(t, np.asarray(est[f"{name}.v"])[fixes], np.asarray(est[f"{name}.acceleration"])[fixes],
+                     np.asarray(est[f"{name}.effort"])[fixes], sig["time"], sig[roles["v"]], sig[roles["effort"]],
+                     style, train)
+    m = {k: _finite(x) if isinstance(x, float) else x for k, x in m.items()}
+    rec = np.asarray(feats["regimes"])
+    dt = np.r_[0.0, np.diff(t)]  # a fix stands for the interval before it
+    running = float(dt[rec != 0].sum()) or 1.0
+    return {**m, "brake_rate_error_step": {str(k + 1): e for k, e in enumerate(m["brake_rate_error"]) if e is not None},
+            "regime_share": {REGIME_NAMES[c]: float(dt[rec == c].sum() / running) for c in (1, 2, 3, 4)},
+            "features": {"max_power_w": _finite(feats["max_power"]), "max_effort_n": _finite(feats["max_effort"]),
+                         "cruise_speed_kmh": _finite(feats["cruise_speed"] / KMH),
+                         "cruise_above_140": float(feats["cruise_speed"] / KMH > 140.0),
+                         "final_coast_min": _finite(feats["final_coast_duration"] / 60.0),
+                         "final_brake_s": _finite(feats["final_brake_duration"]),
+                         "brake_rates": [_finite(x) for x in feats["brake_rates"]]}}, feats
+
+
+def _finite(x) -> float | None:
+    """None where a feature is undefined (NaN), as JSON has no NaN."""
+    return float(x) if x is not None and np.isfinite(x) else None
+
+
+def term_shares(est: dict, name: str, rows: np.ndarray) -> dict[str, float]:
+    """The largest shares of the linear and quadratic terms in r(v) along the run (Fig. 5 of
+    Cunillera et al. (2022): up to 11 % and 76 %), with the estimator's running r0-r2 and v."""
+    v = np.maximum(np.asarray(est[f"{name}.v"])[rows], 0.0)
+    r0, r1, r2 = (np.asarray(est[f"{name}.r{k}"])[rows] for k in range(3))
+    total = r0 + r1 * v + r2 * v * v
+    return {"linear_share_max": float(np.max(r1 * v / total)), "quadratic_share_max": float(np.max(r2 * v * v / total))}
+
+
+def blocks(regime: np.ndarray) -> list[tuple[int, int, int]]:
+    """Runs of equal regime as (code, first row, last row)."""
+    r = np.asarray(regime).astype(int)
+    edges = np.flatnonzero(np.diff(r)) + 1
+    starts, ends = np.r_[0, edges], np.r_[edges - 1, len(r) - 1]
+    return [(int(r[a]), int(a), int(b)) for a, b in zip(starts, ends)]
+
+
+def final_coast_and_brake(t: np.ndarray, regime: np.ndarray) -> tuple[float, float]:
+    """Durations (s) of the final brake (the last braking block, to the stop) and of the coast
+    before it (the coasting rows after the last traction or cruising row and before that
+    brake; a brake for a limit inside it does not count), from the driver's regime per row,
+    each row standing for the step that follows it."""
+    r = np.asarray(regime).astype(int)
+    dt = np.r_[np.diff(t), 0.0]
+    bl = blocks(r)
+    last_brake = next((b for b in reversed(bl) if b[0] == 4), None)
+    if last_brake is None:
+        return float("nan"), float("nan")
+    brake = float(dt[last_brake[1]:last_brake[2] + 1].sum())
+    before = r[:last_brake[1]]
+    pulling = np.flatnonzero((before == 1) | (before == 2))
+    k0 = pulling[-1] + 1 if len(pulling) else 0
+    coast = float(dt[k0:last_brake[1]][before[k0:] == 3].sum())
+    return coast, brake
+
+
+class TrainResistance(Study):
+    """Cunillera et al. (2022) on simulated runs: every estimator's resistance, the truth, the
+    paper's figures per run and over a Monte Carlo."""
+    default_variant = DEFAULT_VARIANT
+    roles = ROLES
+    figures_of_signals = PLOTS
+    summary_metrics = ("*.speed_rmse_kmh", "*.position_rmse_m", "*.resistance_rel_error", "*.r?_rel_error",
+                       "*.seconds", "*_share_max", "*regime_accuracy", "*max_power_rel_error", "*max_effort_rel_error",
+                       "*cruise_speed_error_kmh", "*brake_rate_error*", "*.features.max_power_w",
+                       "*.features.cruise_speed_kmh", "*.features.final_*", "truth.cruise_target_kmh",
+                       "truth.final_coast_min", "truth.final_brake_s", "truth.share_*", "wall_time_s")
+
+    # ---- per run -----------------------------------------------------------------------------
+    def bind(self, system) -> dict:
+        """The roles, and the check that every observer of the GNSS samples at its period (a
+        ``--set gnss.sample_period`` alone would leave the observers at the old one)."""
+        roles = super().bind(system)
+        period = float(roles["gnss_period"])
+        for o in system.observers:
+            own = o.period if o.period is not None else system.step_size
+            if any(s.startswith("gnss.") for s in o.measurements.values()) and abs(own - period) > 1e-9 * period:
+                raise UserError(f"{system.source or system.name}: Observer {o.name!r} samples every {own:g} s but "
+                                f"the GNSS fixes come every {period:g} s: set {o.name}.samplePeriod={period:g} too")
+        return roles
+
+    def metrics(self, run: RunData) -> dict:
+        sig, est, roles = run.signals, run.estimates, run.roles
+        t = np.asarray(est["time"])
+        n = len(t)
+        fixes_all = np.flatnonzero(np.asarray(sig[roles["fix"]])[:n] != 0)
+        fixes = fixes_all[1:]  # the first is the initial state
+        last = n - 1
+        r_true = np.array([float(sig[roles[k]][last]) for k in ("r0", "r1", "r2")])
+        out: dict = {}
+        for name in estimators_of(est):
+            r_hat = np.array([float(est[f"{name}.{k}"][last]) for k in ("r0", "r1", "r2")])
+            e_v = (np.asarray(est[f"{name}.v"])[fixes] - np.asarray(sig[roles["v"]])[fixes]) / KMH
+            e_s = np.asarray(est[f"{name}.s"])[fixes] - np.asarray(sig[roles["s"]])[fixes]
+            out[name] = {
+                "speed_rmse_kmh": float(np.sqrt(np.mean(e_v * e_v))),
+                "position_rmse_m": float(np.sqrt(np.mean(e_s * e_s))),
+                "resistance_rel_error": resistance_rel_error(r_hat, r_true),
+                **{f"r{i}_rel_error": float((r_hat[i] - r_true[i]) / r_true[i]) for i in range(3)},
+                **{f"r{i}_final": float(r_hat[i]) for i in range(3)},
+                **term_shares(est, name, fixes),
+                "seconds": float(run.base["observers"].get(name, {}).get("wall_time_s", float("nan"))),
+            }
+            if f"{name}.acceleration" in est and f"{name}.effort" in est and len(fixes_all) >= 2:
+                out[name].update(regime_scores(run, name, fixes_all)[0])
+        out["truth"] = self._truth(run, r_true)
+        return out
+
+    @staticmethod
+    def _truth(run: RunData, r_true: np.ndarray) -> dict:
+        """The run's true resistance, the driver's style and, by the paper's definitions on the
+        driver's exact steps (:func:`estimators.driving_regimes.reference_features`), the shares
+        of the regimes in the running time (standstill left out), the final coast and brake
+        durations and the applied brake rate per ATB-EG step."""
+        from estimators.driving_regimes import reference_features, true_regimes
+
+        sig, roles = run.signals, run.roles
+        t, v, f = (np.asarray(sig[k]) for k in ("time", roles["v"], roles["effort"]))
+        regime = true_regimes(t, v, f)
+        dt = np.r_[np.diff(t), 0.0]
+        running = float(dt[regime != 0].sum())
+        ref = reference_features(t, v, f, mass_effective(roles))
+        vc = float(sig[roles["cruise_target"]][0])
+        return {
+            **{f"r{i}": float(r_true[i]) for i in range(3)},
+            "run_time_s": float(t[-1] - t[0]), "running_time_s": running, "max_power_w": float(roles["max_power"]),
+            "top_speed_kmh": float(np.max(v) / KMH),
+            "cruise_target_kmh": vc / KMH, "cruise_above_140": float(vc / KMH > 140.0),
+            "cycles": float(sig[roles["cycles"]][0]), "traction_fraction": float(sig[roles["traction_fraction"]][0]),
+            **{f"brake_rate_{k}": float(sig[roles[f"brake_rate_{k}"]][0]) for k in range(1, 6)},
+            **{f"applied_brake_rate_{k}": _finite(ref["brake_rates"][k - 1]) for k in range(1, 6)},
+            "final_coast_min": _finite(ref["final_coast_duration"] / 60.0),
+            "final_brake_s": _finite(ref["final_brake_duration"]),
+            **{f"share_{REGIMES[c]}": float(dt[regime == c].sum() / running) for c in (1, 2, 3, 4)},
+        }
+
+    def series(self, run: RunData) -> dict[str, np.ndarray]:
+        """What a Monte Carlo member brings back for the study's figures (float32): at its GNSS
+        fixes the position and GNSS speed (Fig. 2); per estimator the traction power samples
+        of the initial acceleration (mid speed in km/h, power in W; Fig. 9) and the braking
+        samples (mid speed, deceleration, ATB-EG step; Fig. 8) of its recognised regimes."""
+        sig, est, roles = run.signals, run.estimates, run.roles
+        n = len(est["time"])
+        fixes = np.flatnonzero(np.asarray(sig[roles["fix"]])[:n] != 0)
+        out = {"position": sig[roles["gnss_position"]][fixes], "speed_kmh": sig[roles["gnss_speed"]][fixes] / KMH}
+        m_eff = mass_effective(roles)
+        for name in estimators_of(est):
+            if f"{name}.acceleration" not in est or len(fixes) < 2:
+                continue
+            feats = regime_scores(run, name, fixes)[1]
+            p, b = feats["power_samples"], feats["brake_samples"]
+            out[f"{name}.power_speed_kmh"] = p["speed"][p["initial"]] / KMH
+            out[f"{name}.power_w"] = p["power"][p["initial"]] * m_eff
+            out[f"{name}.brake_speed_kmh"] = b["speed"] / KMH
+            out[f"{name}.brake_deceleration"] = b["deceleration"]
+            out[f"{name}.brake_step"] = b["step"]
+        return {k: np.asarray(v, dtype=np.float32) for k, v in out.items()}
+
+    def figures(self, run: RunData, out: Path) -> list[str]:
+        from . import figures
+
+        return figures.run_figures(run, out)
+
+    def report_md(self, metrics: dict) -> str:
+        names = [k for k, v in metrics.items() if isinstance(v, dict) and "resistance_rel_error" in v]
+        L = ["## Running resistance at the end of the run", "",
+             "| estimator | speed rmse [km/h] | position rmse [m] | resistance rel. error (40-140 km/h) | "
+             "r0 rel. | r1 rel. | r2 rel. | wall [s] |", "|---|---|---|---|---|---|---|---|"]
+        L += [f"| {n} | {_row(metrics[n])} |" for n in names]
+        tr = metrics["truth"]
+        L += ["", f"True at the end: r0 = {tr['r0']:.5g} N/kg, r1 = {tr['r1']:.4g} N/(kg m/s), "
+              f"r2 = {tr['r2']:.4g} N/(kg (m/s)^2).", ""]
+        scored = [n for n in names if "regime_accuracy" in metrics[n]]
+        if scored:
+            L += ["## Driving regimes and features (§3.2-3.3)", "",
+                  "| estimator | regime accuracy | max. power rel. error | max. effort rel. error | "
+                  "cruise speed error [km/h] | brake rate error per ATB-EG step [m/s2] |", "|---|---|---|---|---|---|"]
+            L += [f"| {n} | {_f(metrics[n]['regime_accuracy'], '.3f')} | {_f(metrics[n]['max_power_rel_error'], '.4f')} | "
+                  f"{_f(metrics[n]['max_effort_rel_error'], '.4f')} | {_f(metrics[n]['cruise_speed_error_kmh'], '.2f')} | "
+                  f"{', '.join(_f(e, '+.3f') for e in metrics[n]['brake_rate_error'])} |" for n in scored]
+            L.append("")
+        head = " | ".join(f"{n} (recognised)" for n in scored)
+        L += ["## The run beside the paper's Fig. 3 run", "",
+              f"| | truth | {head + ' | ' if head else ''}Cunillera et al. (2022) |",
+              "|---|---|" + "---|" * len(scored) + "---|"]
+        for regime, share in PAPER["shares"].items():
+            rec = "".join(f"{100 * metrics[n]['regime_share'][regime]:.1f} | " for n in scored)
+            L.append(f"| {regime} [% of the running time] | {100 * tr[f'share_{regime}']:.1f} | {rec}{100 * share:.1f} |")
+        feats = [metrics[n]["features"] for n in scored]
+        L += [f"| cruise speed [km/h] | {tr['cruise_target_kmh']:.1f} (target) | "
+              + "".join(f"{_f(f['cruise_speed_kmh'], '.1f')} | " for f in feats) + "- |",
+              f"| final coast [min] | {_f(tr['final_coast_min'], '.2f')} | "
+              + "".join(f"{_f(f['final_coast_min'], '.2f')} | " for f in feats) + "2.5-10 over its 67 runs (Fig. 7) |",
+              f"| final brake [s] | {_f(tr['final_brake_s'], '.0f')} | "
+              + "".join(f"{_f(f['final_brake_s'], '.0f')} | " for f in feats) + "- |"]
+        for term, what in (("linear", "r1 v"), ("quadratic", "r2 v^2")):
+            L.append(f"| largest share of {what} in r(v) [%] | - | "
+                     + "".join(f"{100 * metrics[n][f'{term}_share_max']:.0f} | " for n in scored)
+                     + f"{100 * PAPER[f'{term}_share_max']:.0f} (Fig. 5) |")
+        L += ["", "Truth: the paper's regime definitions on the driver's exact 1 s steps "
+              "(estimators.driving_regimes.reference_features); the cruise speed is the driver's target.",
+              "", observers_md(metrics)]
+        return "\n".join(L)
+
+    def table_md(self, table: dict[str, dict]) -> str:
+        L = ["| variant | estimator | speed rmse [km/h] | position rmse [m] | resistance rel. error | r0 rel. | "
+             "r1 rel. | r2 rel. | wall [s] |", "|---|---|---|---|---|---|---|---|---|"]
+        for variant, m in table.items():
+            L += [f"| {variant} | {n} | {_row(m[n])} |" for n, v in m.items()
+                  if isinstance(v, dict) and "resistance_rel_error" in v]
+        return "\n".join(L)
+
+    def summary_md(self, summary: dict[str, dict[str, dict]], runs: int) -> str:
+        L = [super().summary_md(summary, runs), "", "## Beside Cunillera et al. (2022) (67 NS runs, VIRM-VI)", "",
+             "| variant | quantity | truth | " + "estimators (recognised regimes and features) | "
+             "Cunillera et al. (2022) |", "|---|---|---|---|---|"]
+        for variant, s in summary.items():
+            def stat(key, k="p50", scale=1.0, fmt=".3g"):
+                return format(s[key][k] * scale, fmt) if key in s else "-"
+
+            def cv(key):
+                return f"{s[key]['std'] / s[key]['mean']:.2f}" if key in s and s[key]["mean"] else "-"
+
+            names = sorted({k.split(".")[0] for k in s if k.endswith(".r0_final")})
+
+            def each(fn):
+                return "; ".join(f"{n}: {fn(n)}" for n in names) or "-"
+            rows = [
+                ("final r0, min-max [N/kg]", f"median {stat('truth.r0', fmt='.5f')}",
+                 each(lambda n: _pct(s, f"{n}.r0_final")), PAPER["r0_bounds"]),
+                ("largest share of r1 v in r(v), median", "-", each(lambda n: stat(f"{n}.linear_share_max", scale=100,
+                                                                                   fmt=".0f") + " %"),
+                 f"{100 * PAPER['linear_share_max']:.0f} % (Fig. 5)"),
+                ("largest share of r2 v^2 in r(v), median", "-",
+                 each(lambda n: stat(f"{n}.quadratic_share_max", scale=100, fmt=".0f") + " %"),
+                 f"{100 * PAPER['quadratic_share_max']:.0f} % (Fig. 5)"),
+                ("runs cruising above 140 km/h", f"{stat('truth.cruise_above_140', 'mean', 100, '.0f')} %",
+                 each(lambda n: stat(f"{n}.features.cruise_above_140", "mean", 100, ".0f") + " %"),
+                 f"{100 * PAPER['above_140']:.0f} %"),
+                ("final coast [min], min-max",
+                 f"{stat('truth.final_coast_min', 'min', fmt='.1f')}-{stat('truth.final_coast_min', 'max', fmt='.1f')}",
+                 each(lambda n: f"{stat(f'{n}.features.final_coast_min', 'min', fmt='.1f')}-"
+                                f"{stat(f'{n}.features.final_coast_min', 'max', fmt='.1f')}"),
+                 f"{PAPER['coast_min'][0]}-{PAPER['coast_min'][1]}"),
+                ("CV of the final brake time", cv("truth.final_brake_s"),
+                 each(lambda n: cv(f"{n}.features.final_brake_s")), f"{PAPER['brake_cv']:.2f}"),
+                ("CV of the final coast time", cv("truth.final_coast_min"),
+                 each(lambda n: cv(f"{n}.features.final_coast_min")), f"{PAPER['coast_cv']:.2f}"),
+            ]
+            for regime, share in PAPER["shares"].items():
+                rows.append((f"{regime} share of the running time, median",
+                             f"{stat(f'truth.share_{regime}', scale=100, fmt='.1f')} %",
+                             each(lambda n: stat(f"{n}.regime_share.{regime}", scale=100, fmt=".1f") + " %"),
+                             f"{100 * share:.1f} % (its Fig. 3 run)"))
+            L += [f"| {variant} | {q} | {t} | {e} | {p} |" for q, t, e, p in rows]
+        L += ["", "The paper's resistance is that of a VIRM-VI; ours is the published KISS Davis law (the "
+              "estimators start from it), so compare spreads, not values. Truth: the driver's style and the "
+              "paper's regime definitions on its exact 1 s steps."]
+        return "\n".join(L)
+
+    def study_figures(self, table: dict, series: dict, out: Path) -> list[str]:
+        from . import figures
+
+        return figures.study_figures(table, series, out)
+
+
+def _pct(s: dict, key: str) -> str:
+    if key not in s:
+        return "-"
+    return f"{s[key]['min']:.5f}-{s[key]['max']:.5f} (p50 {s[key]['p50']:.5f}, p95 {s[key]['p95']:.5f})"
+
+
+def _f(x, fmt: str) -> str:
+    return "-" if x is None else format(x, fmt)
+
+
+def _row(e: dict) -> str:
+    return (f"{e['speed_rmse_kmh']:.3f} | {e['position_rmse_m']:.2f} | {e['resistance_rel_error']:.4f} | "
+            f"{e['r0_rel_error']:+.4f} | {e['r1_rel_error']:+.4f} | {e['r2_rel_error']:+.4f} | {e['seconds']:.3f}")
+
+
+STUDY = TrainResistance(__doc__.strip().splitlines()[0])
