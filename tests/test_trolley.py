@@ -101,6 +101,40 @@ def test_c_equals_the_twin(run5, twin):
     print(f"C vs twin: worst relative difference of the increments {worst:.1e}")
 
 
+def test_angular_rates_are_continuous_at_element_ends(fmu_dir, run5, twin, tmp_path):
+    """The C's increments where the trolley passes an element end in motion (80 m: a
+    transition starts; 150 m: a vertical curve starts). With the shipped bloss shapes the
+    mean rates dtheta / h change smoothly across: their second difference over the steps
+    around is at most the jump of the angular acceleration times h (2.5e-4 rad/s2 of roll at
+    80 m: 6e-7 rad/s), as elsewhere. With linear transitions (same table, C = twin there too)
+    the roll rate jumps by 0.1 m / (1.5 m 40 m) 1 m/s = 1.7e-3 rad/s at 80 m and the pitch
+    rate by 8e-3 / 60 m 1 m/s = 1.3e-4 rad/s at 150 m."""
+    from models.track_geometry import DEFAULT_TRACK
+
+    lin = tmp_path / "linear.csv"
+    lin.write_text(DEFAULT_TRACK.read_text().replace(",bloss", ",linear"))
+    rlin = run(fmu_dir, 0.005, 185.0, {"track_file": str(lin)})
+    h = 0.005
+
+    def second_difference(r, k):
+        w = np.array([r[f"dtheta_{a}"][k - 6:k + 7] / h for a in "xyz"])
+        return np.abs(np.diff(w, 2, axis=1)).max(axis=1)
+
+    passed = [(b, t) for b in twin.track.kinks if (t := twin.profile.time_at(b)) is not None and t < 184.0]
+    assert [b for b, _ in passed] == [80.0, 150.0]
+    tw_lin = TrolleyTwin({}, track_file=lin)
+    for b, t in passed:
+        k = int(np.searchsorted(run5["t"], t))
+        assert second_difference(run5, k).max() < 1e-6, b
+        jump = second_difference(rlin, k)
+        assert jump[0 if b == 80.0 else 1] > (1.6e-3 if b == 80.0 else 1.2e-4), (b, jump)
+        for j in range(k - 2, k + 3):  # C = twin with linear transitions too
+            o = tw_lin.outputs_over(rlin["interval_start"][j], rlin["t"][j], h)
+            for name in ("dtheta_x", "dtheta_y", "dtheta_z", "dv_x", "dv_y", "dv_z", "north", "down", "roll",
+                         "pitch", "vd"):
+                assert abs(rlin[name][j] - o[name]) <= 1e-15 + 1e-12 * abs(o[name]), (b, j, name)
+
+
 def test_increments_at_rest_are_earth_rate_and_gravity(run5):
     """(a) At rest the increments are C_n^b omega_ie^n dt and C_n^b (0, 0, -gamma(L, h)) dt
     (models.earth, the Python formulas) to 1e-15 relative, dt the interval stepped."""
