@@ -54,10 +54,12 @@ goes from ``a0`` to ``a1`` as ``a = a0 + (a1 - a0) f(x)``:
             parabolic vertical curve (vertical radius ``L / |g1 - g0|``). The rates ``a'``
             jump at both ends, so the roll rate (cant) and the pitch rate (gradient) of a
             moving vehicle jump there.
-``bloss``   ``f = 3 x^2 - 2 x^3``, Bloss's transition as high-speed lines build it: ``a' =
-            (a1 - a0) 6 x (1 - x) / L`` is zero at both ends, so curvature, cant and gradient
-            join their neighbours with a continuous rate, and so do the roll, pitch and yaw
-            rates (the peak rate, at mid-length, is 1.5 times the linear one). For a clothoid
+``bloss``   ``f = 3 x^2 - 2 x^3``, Bloss's transition as high-speed lines build it (IFC 4.3
+            names it ``BLOSSCURVE``); for a vertical curve the gradient is blended by the
+            same cubic. ``a' = (a1 - a0) 6 x (1 - x) / L`` is zero at both ends, so
+            curvature, cant and gradient join their neighbours with a continuous rate, and so
+            do the roll, pitch and yaw rates (the peak rate, at mid-length, is 1.5 times the
+            linear one; what still jumps is ``a''``, an angular acceleration). For a clothoid
             row the heading is ``chi0 + k0 u + (k1 - k0) L (x^3 - x^4 / 2)``, ``u = s - s0``:
             at the end ``(k0 + k1) L / 2`` as for the clothoid (``L / (2 R)`` from a
             straight into a curve of radius ``R``).
@@ -65,7 +67,8 @@ goes from ``a0`` to ``a1`` as ``a = a0 + (a1 - a0) f(x)``:
 Why it matters here: an INS that works from increments (two-sample coning and sculling)
 takes the angular rate as smooth over two intervals; across a rate jump ``dw`` it is off by
 about ``|dw| h |dv| / 12`` per jump (3.4e-8 m/s at the 100 mm cant ramp ends at 5 ms), and
-that integrates. Real transitions and a real trolley (finite wheelbase) have continuous
+that integrates (0.0386 mm over the shipped 700 s run at 5 ms with ``linear``; 0.0013 mm
+with ``bloss``). Real transitions and a real trolley (finite wheelbase) have continuous
 rates; the shipped table uses ``bloss`` throughout.
 
 Curvatures are per metre of 3-D arc (``chi' = kappa``; the plan-view curvature is
@@ -89,10 +92,11 @@ The true rail centre line is the design one displaced by ``y(s)`` along the hori
 right normal ``Y = (-sin chi, cos chi, 0)`` (alignment, positive right) and ``z(s)`` along
 the vertical ``D = (0, 0, 1)`` of n0 (level, positive down): ``p_rail = p + y Y + z D``.
 Why the vertical and not the normal of the tangent in the vertical plane: that normal turns
-with the grade angle, whose rate jumps where a vertical curve starts, so the offset line's
-speed (``1 - z kappa_v`` per unit ``s``) would jump there, by 3e-7 for 2 mm at a 7500 m
-vertical radius, and the IMU increments would miss that impulse; ``D`` is constant and ``Y``
-turns with the heading, whose rate (the curvature) is continuous through the clothoids. (A
+with the grade angle, whose rate jumps where a linear vertical curve starts, so the offset
+line's speed (``1 - z kappa_v`` per unit ``s``) would jump there, by 3e-7 for 2 mm at a
+7500 m vertical radius, and the IMU increments would miss that impulse; ``D`` is constant
+and ``Y`` turns with the heading, whose rate (the curvature) is continuous through the
+transitions. (A
 table with a curve straight after a straight, no clothoid, has a curvature jump: there the
 rail's speed jumps by ``y dkappa`` and the increments miss it; use transitions.) ``y`` and
 ``z`` are sums of sinusoids with exact analytic derivatives::
