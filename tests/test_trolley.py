@@ -341,6 +341,18 @@ def test_bad_parameters_and_tables_are_refused(fmu_dir, tmp_path):
             bad.write_text("kind,start_m,end_m,radius_m,cant_mm,gradient_permille\nstraight,0,50,,,\n"
                            "curve_left,50,100,-300,,\ngrade,0,100,,,0\n")
             s.initialize(0.0, parameters={"track_file": str(bad)})
+    head7 = "kind,start_m,end_m,radius_m,cant_mm,gradient_permille,transition\n"
+    for rows, message in (
+            ("straight,0,50,,,,\nclothoid,50,90,,,,cubic\ncurve_left,90,100,300,,,\ngrade,0,100,,,0,\n",
+             r"line 3, column 7 \(transition\): 'cubic' is not one of linear, bloss"),
+            ("straight,0,100,,,,bloss\ngrade,0,100,,,0,\n",
+             r"line 2, column 7 \(transition\): only clothoid and vertical_curve rows take a transition "
+             "shape, not a straight"),
+            ("straight,0,100,,,\ngrade,0,100,,,0,\n", r"line 2: 6 fields, expected 7")):
+        bad.write_text(head7 + rows)
+        with Slave(fmu_dir / "Trolley.fmu") as s:
+            with pytest.raises(FMUError, match=message):
+                s.initialize(0.0, parameters={"track_file": str(bad)})
 
 
 def test_a_user_table_runs(fmu_dir, tmp_path):
