@@ -275,7 +275,10 @@ def test_truth_does_not_depend_on_step_or_clock(fmu_dir, run5, run25):
         a, b = run5[name][200::200], run25[name][400::400]
         c = acc[name][100::100]
         tol = 1e-15 if name in ANGLES else 1e-11
-        assert np.abs(a - b).max() <= tol and np.abs(a - c).max() <= tol + 1e-9, name
+        # the t += h clock's times are ~3e-11 s off: the truth moves by v dt ~ 3e-11 m, and the
+        # height by a few ulps of the ECEF -> geodetic conversion (ulp(6.4e6 m) = 9.3e-10 m)
+        off = 4e-9 if name == "height" else 1e-9
+        assert np.abs(a - b).max() <= tol and np.abs(a - c).max() <= tol + off, name
     # the t += h clock ends 3.7e-11 s off 200 s: the sums differ by the integrand times that
     for name in ("dtheta_x", "dtheta_z", "dv_x", "dv_z"):
         s5, s10 = math.fsum(run5[name]), math.fsum(acc[name])
