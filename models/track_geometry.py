@@ -24,7 +24,8 @@ the integrand is entire and the heading changes by less than 2 rad on a piece).
 
 Element table (CSV, the user's file ``track_file``)
 ---------------------------------------------------
-Header ``kind,start_m,end_m,radius_m,cant_mm,gradient_permille``; one row per element; the
+Header ``kind,start_m,end_m,radius_m,cant_mm,gradient_permille`` and optionally a seventh
+column ``transition`` (a table without it is read as all ``linear``); one row per element; the
 horizontal rows (``straight``, ``clothoid``, ``curve_left``, ``curve_right``) and the
 vertical rows (``grade``, ``vertical_curve``) each tile ``[0, length]`` in order (the first
 starts at 0, each starts where the previous one of its layer ended, ``end_m > start_m``),
@@ -36,19 +37,47 @@ kind            meaning
 straight        curvature 0, cant 0
 curve_left/     circular curve, ``radius_m`` > 0 (curvature ``chi' = -1/R`` left, ``+1/R``
 curve_right     right), cant ``cant_mm`` in [0, 200) on the outer rail (blank = 0)
-clothoid        transition: curvature and cant linear in ``s`` from the previous element's
-                to the next one's (both neighbours must be straights or curves)
+clothoid        transition: curvature and cant ramp from the previous element's to the
+                next one's (both neighbours must be straights or curves), in the shape
+                ``transition`` gives
 grade           constant gradient ``gradient_permille`` (per mille, positive uphill, |g| < 100)
-vertical_curve  gradient linear in ``s`` between the neighbouring grades: parabolic in the
-                arc length (the vertical radius is ``length / |g1 - g0|``)
+vertical_curve  gradient ramps between the neighbouring grades, in the shape ``transition``
+                gives
 ==============  =========================================================================
+
+Transition shapes (column ``transition``, only on ``clothoid`` and ``vertical_curve`` rows;
+blank = ``linear``). With ``x = (s - s0) / L`` the relative position in the element of length
+``L``, a quantity ``a`` (curvature and cant of a clothoid row, gradient of a vertical curve)
+goes from ``a0`` to ``a1`` as ``a = a0 + (a1 - a0) f(x)``:
+
+``linear``  ``f = x``: the clothoid (curvature linear in ``s``, a straight cant ramp) and the
+            parabolic vertical curve (vertical radius ``L / |g1 - g0|``). The rates ``a'``
+            jump at both ends, so the roll rate (cant) and the pitch rate (gradient) of a
+            moving vehicle jump there.
+``bloss``   ``f = 3 x^2 - 2 x^3``, Bloss's transition as high-speed lines build it (IFC 4.3
+            names it ``BLOSSCURVE``); for a vertical curve the gradient is blended by the
+            same cubic. ``a' = (a1 - a0) 6 x (1 - x) / L`` is zero at both ends, so
+            curvature, cant and gradient join their neighbours with a continuous rate, and so
+            do the roll, pitch and yaw rates (the peak rate, at mid-length, is 1.5 times the
+            linear one; what still jumps is ``a''``, an angular acceleration). For a clothoid
+            row the heading is ``chi0 + k0 u + (k1 - k0) L (x^3 - x^4 / 2)``, ``u = s - s0``:
+            at the end ``(k0 + k1) L / 2`` as for the clothoid (``L / (2 R)`` from a
+            straight into a curve of radius ``R``).
+
+Why it matters here: an INS that works from increments (two-sample coning and sculling)
+takes the angular rate as smooth over two intervals; across a rate jump ``dw`` it is off by
+about ``|dw| h |dv| / 12`` per jump (3.4e-8 m/s at the 100 mm cant ramp ends at 5 ms), and
+that integrates (0.0386 mm over the shipped 700 s run at 5 ms with ``linear``; 0.0013 mm
+with ``bloss``). Real transitions and a real trolley (finite wheelbase) have continuous
+rates; the shipped table uses ``bloss`` throughout.
 
 Curvatures are per metre of 3-D arc (``chi' = kappa``; the plan-view curvature is
 ``kappa / cos th``, 3e-5 relative apart at 8 per mille). The shipped table
 ``models/data/trolley_track.csv`` is 600 m: straight, transition, R 400 m right with
 100 mm cant, transition, straight, transition, R 600 m left with 60 mm cant, transition,
-straight; level, a vertical curve to +8 per mille, another to -4 per mille. Problems
-(non-monotonic distances, gaps, a radius <= 0, an unknown kind ...) raise
+straight; level, a vertical curve to +8 per mille, another to -4 per mille; every transition
+and vertical curve ``bloss``. Problems (non-monotonic distances, gaps, a radius <= 0, an
+unknown kind or transition ...) raise
 :class:`fmus.errors.UserError` naming the file, line and column.
 
 Cant and body roll
@@ -63,10 +92,11 @@ The true rail centre line is the design one displaced by ``y(s)`` along the hori
 right normal ``Y = (-sin chi, cos chi, 0)`` (alignment, positive right) and ``z(s)`` along
 the vertical ``D = (0, 0, 1)`` of n0 (level, positive down): ``p_rail = p + y Y + z D``.
 Why the vertical and not the normal of the tangent in the vertical plane: that normal turns
-with the grade angle, whose rate jumps where a vertical curve starts, so the offset line's
-speed (``1 - z kappa_v`` per unit ``s``) would jump there, by 3e-7 for 2 mm at a 7500 m
-vertical radius, and the IMU increments would miss that impulse; ``D`` is constant and ``Y``
-turns with the heading, whose rate (the curvature) is continuous through the clothoids. (A
+with the grade angle, whose rate jumps where a linear vertical curve starts, so the offset
+line's speed (``1 - z kappa_v`` per unit ``s``) would jump there, by 3e-7 for 2 mm at a
+7500 m vertical radius, and the IMU increments would miss that impulse; ``D`` is constant
+and ``Y`` turns with the heading, whose rate (the curvature) is continuous through the
+transitions. (A
 table with a curve straight after a straight, no clothoid, has a curvature jump: there the
 rail's speed jumps by ``y dkappa`` and the increments miss it; use transitions.) ``y`` and
 ``z`` are sums of sinusoids with exact analytic derivatives::
@@ -133,6 +163,9 @@ from .track import ProfileTable, SplitMix64, psd_alignment, psd_vertical
 HERE = Path(__file__).resolve().parent
 DEFAULT_TRACK = HERE / "data" / "trolley_track.csv"
 COLUMNS = ("kind", "start_m", "end_m", "radius_m", "cant_mm", "gradient_permille")
+#: the optional seventh column and its values (index = the shape code the C uses too)
+TRANSITION = "transition"
+SHAPES = ("linear", "bloss")
 HORIZONTAL = ("straight", "clothoid", "curve_left", "curve_right")
 VERTICAL = ("grade", "vertical_curve")
 #: distance between the rail centres of standard gauge (m): cant c gives roll asin(c / b)
@@ -165,7 +198,8 @@ class Alignment:
     curvature ``k0[i]..k1[i]`` (1/m, + right), signed cant ``c0[i]..c1[i]`` (m) and heading
     ``chi[i]`` at their start (relative to the first straight: the azimuth is added by
     :class:`TrackGeometry`); vertical elements on ``vs[j]..vs[j+1]`` with gradient
-    ``g0[j]..g1[j]`` (rise/run)."""
+    ``g0[j]..g1[j]`` (rise/run). ``hshape``/``vshape``: each element's transition shape,
+    an index into :data:`SHAPES` (0 linear, 1 bloss; all linear when not given)."""
 
     hs: list[float]
     k0: list[float]
@@ -175,6 +209,12 @@ class Alignment:
     vs: list[float]
     g0: list[float]
     g1: list[float]
+    hshape: list[int] | None = None
+    vshape: list[int] | None = None
+
+    def __post_init__(self):
+        self.hshape = list(self.hshape) if self.hshape is not None else [0] * len(self.k0)
+        self.vshape = list(self.vshape) if self.vshape is not None else [0] * len(self.g0)
 
     @property
     def length(self) -> float:
@@ -195,12 +235,15 @@ class Alignment:
                 rows = [(i + 1, r) for i, r in enumerate(csv.reader(f)) if any(c.strip() for c in r)]
         except OSError as e:
             raise UserError(f"{where}: cannot open ({e.strerror})") from None
-        if not rows or [c.strip() for c in rows[0][1]] != list(COLUMNS):
-            raise UserError(f"{where}, line 1: header must be {','.join(COLUMNS)}")
-        hor, ver = [], []  # (line, kind, start, end, radius, cant, gradient)
+        head = [c.strip() for c in rows[0][1]] if rows else []
+        if head not in (list(COLUMNS), [*COLUMNS, TRANSITION]):
+            raise UserError(f"{where}, line 1: header must be {','.join(COLUMNS)} (and optionally "
+                            f",{TRANSITION})")
+        ncol = len(head)
+        hor, ver = [], []  # (line, kind, start, end, radius, cant, gradient, shape)
         for no, r in rows[1:]:
-            if len(r) != len(COLUMNS):
-                raise UserError(f"{where}, line {no}: {len(r)} fields, expected {len(COLUMNS)}")
+            if len(r) != ncol:
+                raise UserError(f"{where}, line {no}: {len(r)} fields, expected {ncol}")
             kind = r[0].strip()
             if kind not in HORIZONTAL + VERTICAL:
                 raise UserError(f"{where}, line {no}, column 1 (kind): '{kind}' is not one of "
@@ -220,6 +263,14 @@ class Alignment:
                                     "a finite number")
                 vals.append(x)
             start, end, radius, cant, grad = vals
+            shape = r[6].strip() if ncol > 6 else ""
+            if shape and shape not in SHAPES:
+                raise UserError(f"{where}, line {no}, column 7 ({TRANSITION}): '{shape}' is not one of "
+                                f"{', '.join(SHAPES)}")
+            if shape and kind not in ("clothoid", "vertical_curve"):
+                raise UserError(f"{where}, line {no}, column 7 ({TRANSITION}): only clothoid and "
+                                f"vertical_curve rows take a transition shape, not a {kind}")
+            shape = SHAPES.index(shape) if shape else 0
             for j, x in ((2, start), (3, end)):
                 if x is None:
                     raise UserError(f"{where}, line {no}, column {j} ({COLUMNS[j - 1]}): missing")
@@ -246,7 +297,7 @@ class Alignment:
                 if grad is None or not abs(grad) < MAX_GRADIENT_PERMILLE:
                     raise UserError(f"{where}, line {no}, column 6 (gradient_permille): a grade needs "
                                     f"a gradient below {MAX_GRADIENT_PERMILLE:g} per mille in size")
-            layer.append((no, kind, start, end, radius, cant, grad))
+            layer.append((no, kind, start, end, radius, cant, grad, shape))
         if not hor or not ver:
             raise UserError(f"{where}: needs horizontal ({', '.join(HORIZONTAL)}) and vertical "
                             f"({', '.join(VERTICAL)}) elements")
@@ -285,7 +336,7 @@ class Alignment:
         hs = [0.0] + [e[3] for e in hor]
         vs = [0.0] + [e[3] for e in ver]
         vs[-1] = hs[-1]
-        return cls(hs, k0, k1, c0, c1, vs, g0, g1)
+        return cls(hs, k0, k1, c0, c1, vs, g0, g1, [e[7] for e in hor], [e[7] for e in ver])
 
 
 # ---- irregularity lines ----------------------------------------------------------------------
@@ -432,20 +483,34 @@ class TrackGeometry:
 
     # -- design angles --
     def angles(self, s: float):
-        """chi, chi', chi'', g, g', cant c (m, signed), c' at s."""
+        """chi, chi', chi'', g, g', cant c (m, signed), c' at s (the shapes of the module
+        docstring; the C has the same arithmetic)."""
         al = self.al
         i = min(max(bisect.bisect_right(al.hs, s) - 1, 0), len(al.k0) - 1)
         L = al.hs[i + 1] - al.hs[i]
         u = s - al.hs[i]
-        dk = (al.k1[i] - al.k0[i]) / L
-        chi = self.chi[i] + u * (al.k0[i] + 0.5 * dk * u)
-        chi1 = al.k0[i] + dk * u
-        dc = (al.c1[i] - al.c0[i]) / L
-        c = al.c0[i] + dc * u
+        if al.hshape[i]:  # bloss: f = x^2 (3 - 2 x), f' = 6 x (1 - x) / L
+            x = u / L
+            f, f1 = x * x * (3.0 - 2.0 * x), 6.0 * x * (1.0 - x) / L
+            Dk, Dc = al.k1[i] - al.k0[i], al.c1[i] - al.c0[i]
+            chi = self.chi[i] + u * al.k0[i] + Dk * L * (x * x * x * (1.0 - 0.5 * x))
+            chi1, dk = al.k0[i] + Dk * f, Dk * f1
+            c, dc = al.c0[i] + Dc * f, Dc * f1
+        else:
+            dk = (al.k1[i] - al.k0[i]) / L
+            chi = self.chi[i] + u * (al.k0[i] + 0.5 * dk * u)
+            chi1 = al.k0[i] + dk * u
+            dc = (al.c1[i] - al.c0[i]) / L
+            c = al.c0[i] + dc * u
         j = min(max(bisect.bisect_right(al.vs, s) - 1, 0), len(al.g0) - 1)
         Lv = al.vs[j + 1] - al.vs[j]
-        dg = (al.g1[j] - al.g0[j]) / Lv
-        g = al.g0[j] + dg * (s - al.vs[j])
+        if al.vshape[j]:
+            x = (s - al.vs[j]) / Lv
+            Dg = al.g1[j] - al.g0[j]
+            g, dg = al.g0[j] + Dg * (x * x * (3.0 - 2.0 * x)), Dg * (6.0 * x * (1.0 - x) / Lv)
+        else:
+            dg = (al.g1[j] - al.g0[j]) / Lv
+            g = al.g0[j] + dg * (s - al.vs[j])
         return chi, chi1, dk, g, dg, c, dc
 
     def tangent(self, s: float) -> list:

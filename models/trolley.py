@@ -53,7 +53,8 @@ communication point to this one, by 3-point Gauss-Legendre quadrature on panels 
 10 ms (error ``5e-7 h^7 max|f^(6)|``: 1e-20 m/s for the 2 m shortest irregularity
 wavelength at 1 m/s; 4e-13 m/s for a 2 mm wobble at 0.5 m and 2 m/s, 25 rad/s), split at every instant where the integrand is not smooth: the speed profile's phase
 ends, and the times the trolley passes the alignment's element ends (where the curvature
-rate, the cant rate or the vertical curvature jump) and the rows of a measured irregularity
+rate, the cant rate or the vertical curvature jump, or with ``bloss`` transitions their
+derivatives) and the rows of a measured irregularity
 table (found once, by bisection of the closed-form ``s(t)``). The interval is the one the importer
 actually stepped: the FMU remembers the previous communication point (``interval_start``)
 and integrates up to the current one, so ``t = n h`` and ``t += h`` masters both get

@@ -1,20 +1,27 @@
 """3-D track geometry (models/track_geometry.py): positions against closed forms (circle,
-clothoid by Fresnel integrals, parabolic vertical curve), continuity of curvature and cant,
+clothoid by Fresnel integrals, parabolic vertical curve, Bloss transitions and cubic-blended
+vertical curves against adaptive quadrature), continuity of curvature and cant (and of their
+rates, so of the roll, pitch and yaw rates, where the transitions are bloss),
 the analytic derivatives against the positions, the chord irregularity of Jiang et al. (2017)
 eq. 1 for a pure sinusoid, and one-line errors for bad element tables."""
 
 from __future__ import annotations
 
 import math
+import tempfile
+from pathlib import Path
 
 import numpy as np
 import pytest
+from scipy.integrate import quad
 from scipy.special import fresnel
 
 from fmus.errors import UserError
 from models import earth
 from models.track_geometry import (DEFAULT_TRACK, Alignment, TrackGeometry, chord_irregularity_along,
                                    ecef_to_lla, irregularity_lines, vector_distance)
+
+HEADER7 = "kind,start_m,end_m,radius_m,cant_mm,gradient_permille,transition\n"
 
 HEADER = "kind,start_m,end_m,radius_m,cant_mm,gradient_permille\n"
 FLAT = {"irregularity_level": 0}
@@ -23,6 +30,13 @@ FLAT = {"irregularity_level": 0}
 def table(tmp_path, rows: str, name="t.csv"):
     p = tmp_path / name
     p.write_text(HEADER + rows)
+    return p
+
+
+def _t7(tmp_path, rows: str, name="t7.csv"):
+    """A table with the transition column."""
+    p = tmp_path / name
+    p.write_text(HEADER7 + rows)
     return p
 
 
@@ -75,6 +89,101 @@ def test_parabolic_vertical_curve_against_closed_form(tmp_path):
         p = tr.design_position(s)
         assert p[0] == pytest.approx(north, abs=1e-11) and p[2] == pytest.approx(-up, abs=1e-12)
     assert tr.point(180.0).theta == pytest.approx(math.atan(dg * 80.0), abs=1e-15)
+
+
+def test_bloss_transition_against_closed_forms(tmp_path):
+    """straight 50 m, Bloss transition 60 m into R 300 m right with 70 mm cant, curve 90 m.
+    With x = u / L: curvature x^2 (3 - 2 x) / R, its rate 6 x (1 - x) / (L R) (zero at both
+    ends, 1.5 / (L R) at mid-length), heading chi0 + (u^3 / L^2 - u^4 / (2 L^3)) / R, at the
+    end L / (2 R) as the clothoid's; cant likewise. Positions against adaptive quadrature of
+    the closed-form heading (scipy), independent of the Gauss-Legendre pieces."""
+    R, L, chi0, c1 = 300.0, 60.0, 0.3, 0.07
+    tr = TrackGeometry({**FLAT, "azimuth": chi0}, _t7(tmp_path, (
+        "straight,0,50,,,,\nclothoid,50,110,,,,bloss\ncurve_right,110,200,300,70,,\ngrade,0,200,,,0,\n")))
+    assert tr.al.hshape == [0, 1, 0]
+
+    def chi(u):
+        return chi0 + (u**3 / L**2 - u**4 / (2 * L**3)) / R
+
+    start = np.array([50 * math.cos(chi0), 50 * math.sin(chi0), 0.0])
+    for u in (0.0, 7.3, 30.0, 59.99, 60.0):
+        x = u / L
+        a = tr.angles(50.0 + u)
+        assert a[0] == pytest.approx(chi(u), abs=1e-15)
+        assert a[1] == pytest.approx(x * x * (3 - 2 * x) / R, abs=1e-17)
+        assert a[2] == pytest.approx(6 * x * (1 - x) / (L * R), abs=1e-18)
+        assert a[5] == pytest.approx(c1 * x * x * (3 - 2 * x), abs=1e-17)
+        assert a[6] == pytest.approx(c1 * 6 * x * (1 - x) / L, abs=1e-18)
+        n = quad(lambda v: math.cos(chi(v)), 0.0, u, epsabs=1e-12, epsrel=0.0)[0] if u else 0.0
+        e = quad(lambda v: math.sin(chi(v)), 0.0, u, epsabs=1e-12, epsrel=0.0)[0] if u else 0.0
+        assert np.abs(tr.design_position(50.0 + u) - (start + [n, e, 0.0])).max() < 1e-11
+    # the end: heading L / (2 R) as for the clothoid; rates zero at both ends, the peak 1.5 times
+    assert tr.angles(110.0)[0] == pytest.approx(chi0 + L / (2 * R), abs=1e-15)
+    for s in (50.0, 110.0 - 1e-12):
+        a = tr.angles(s)
+        assert abs(a[2]) < 1e-16 and abs(a[6]) < 1e-15
+    assert tr.angles(80.0)[2] == pytest.approx(1.5 / (L * R), rel=1e-14)
+    # the circle continues from the transition's end with its heading and radius R
+    p1 = np.array(tr.design_position(110.0))
+    chi1 = chi0 + L / (2 * R)
+    centre = p1 + R * np.array([-math.sin(chi1), math.cos(chi1), 0.0])
+    for u in (12.5, 90.0):
+        c = chi1 + u / R
+        assert np.abs(np.array(tr.design_position(110.0 + u)) - centre
+                      - R * np.array([math.sin(c), -math.cos(c), 0.0])).max() < 1e-10
+
+
+def test_bloss_vertical_curve_against_quadrature(tmp_path):
+    """The gradient blended by 3 x^2 - 2 x^3 from 0 to 12 per mille over [100, 250] m: the
+    vertical curvature 6 x (1 - x) 0.012 / 150 is zero at both ends (pitch rate continuous);
+    down = -int g / sqrt(1 + g^2) ds, north = int 1 / sqrt(1 + g^2) ds by adaptive quadrature."""
+    tr = TrackGeometry({**FLAT, "azimuth": 0.0}, _t7(tmp_path, (
+        "straight,0,400,,,,\ngrade,0,100,,,0,\nvertical_curve,100,250,,,,bloss\ngrade,250,400,,,12,\n")))
+
+    def g(s):
+        x = min(max((s - 100.0) / 150.0, 0.0), 1.0)
+        return 0.012 * x * x * (3 - 2 * x)
+
+    for s in (100.0, 141.0, 175.0, 250.0, 300.0):
+        # north - s: the integrand 1 / sqrt(1 + g^2) - 1 is small, so its absolute tolerance is tight
+        pts = [250.0] if s > 250 else None
+        north = s + (quad(lambda v: -g(v) ** 2 / (1 + math.sqrt(1 + g(v) ** 2)) / math.sqrt(1 + g(v) ** 2),
+                          100.0, s, epsabs=1e-15, epsrel=0.0, points=pts)[0] if s > 100 else 0.0)
+        up = quad(lambda v: g(v) / math.sqrt(1 + g(v) ** 2), 100.0, s, epsabs=1e-13, epsrel=0.0,
+                  points=pts)[0] if s > 100 else 0.0
+        p = tr.design_position(s)
+        assert p[0] == pytest.approx(north, abs=1e-11) and p[2] == pytest.approx(-up, abs=1e-12)
+        assert tr.angles(s)[3] == pytest.approx(g(s), abs=1e-17)
+    assert abs(tr.angles(100.0)[4]) < 1e-18 and abs(tr.angles(250.0 - 1e-12)[4]) < 1e-15
+    assert tr.angles(175.0)[4] == pytest.approx(1.5 * 0.012 / 150.0, rel=1e-14)
+    assert tr.point(175.0).dtheta == pytest.approx(1.5 * 0.012 / 150.0 / (1 + 0.006**2), rel=1e-12)
+
+
+def test_rates_are_continuous_at_every_element_end():
+    """The shipped track (all bloss) with its irregularities: curvature rate, cant rate,
+    vertical curvature and so the yaw, pitch and roll rates per metre (dpsi, dtheta, dphi of
+    Point) join at every element end; the same table with linear transitions has jumps there
+    (a check that would catch the shape not being applied)."""
+    tr = TrackGeometry()
+    linear_table = DEFAULT_TRACK.read_text().replace(",bloss", ",linear")
+    assert tr.al.hshape == [0, 1, 0, 1, 0, 1, 0, 1, 0] and tr.al.vshape == [0, 1, 0, 1, 0]
+    worst, jumps = 0.0, []
+    with tempfile.TemporaryDirectory() as d:
+        f = Path(d) / "linear.csv"
+        f.write_text(linear_table)
+        lin = TrackGeometry(alignment=f)
+        for b in tr.al.breakpoints:
+            for geo, acc in ((tr, None), (lin, jumps)):
+                lo, hi = geo.point(b - 1e-9), geo.point(b + 1e-9)
+                a_lo, a_hi = geo.angles(b - 1e-9), geo.angles(b + 1e-9)
+                d = max(abs(hi.dpsi - lo.dpsi), abs(hi.dtheta - lo.dtheta), abs(hi.dphi - lo.dphi),
+                        abs(a_hi[2] - a_lo[2]), abs(a_hi[4] - a_lo[4]), abs(a_hi[6] - a_lo[6]))
+                if acc is None:
+                    worst = max(worst, d)
+                else:
+                    acc.append(d)
+    assert worst < 1e-11, worst
+    assert min(jumps) > 1e-5  # cant ramps 0.06 / (1.5 40), vertical curves 4e-3 / 60 ...
 
 
 def test_curvature_cant_and_heading_are_continuous():
@@ -215,12 +324,42 @@ def test_positions_map_exactly_to_geodetic():
     ("straight,0,1x0,,,\ngrade,0,100,,,0\n", r"line 2, column 3 \(end_m\): '1x0' is not a finite number"),
     ("straight,0,100,,,\ngrade,0,100,,,\n", r"line 3, column 6 \(gradient_permille\)"),
     ("straight,0,100,,\n", r"line 2: 5 fields, expected 6"),
+    ("straight,0,100,,,,\ngrade,0,100,,,0\n", r"line 2: 7 fields, expected 6"),
 ])
 def test_bad_tables_are_one_line_user_errors(tmp_path, rows, message):
     p = table(tmp_path, rows)
     with pytest.raises(UserError, match=message) as e:
         Alignment.read(p)
     assert "\n" not in str(e.value) and str(p) in str(e.value)
+
+
+@pytest.mark.parametrize("rows, message", [
+    ("straight,0,50,,,,\nclothoid,50,90,,,,cubic\ncurve_left,90,100,300,,,\ngrade,0,100,,,0,\n",
+     r"line 3, column 7 \(transition\): 'cubic' is not one of linear, bloss"),
+    ("straight,0,100,,,,bloss\ngrade,0,100,,,0,\n",
+     r"line 2, column 7 \(transition\): only clothoid and vertical_curve rows take a transition shape, "
+     "not a straight"),
+    ("straight,0,100,,,\ngrade,0,100,,,0,\n", r"line 2: 6 fields, expected 7"),
+])
+def test_bad_transitions_are_one_line_user_errors(tmp_path, rows, message):
+    p = _t7(tmp_path, rows)
+    with pytest.raises(UserError, match=message) as e:
+        Alignment.read(p)
+    assert "\n" not in str(e.value) and str(p) in str(e.value)
+
+
+def test_transition_column_is_optional_and_blank_is_linear(tmp_path):
+    """A six-column table (before the column existed) and blank or 'linear' cells give the
+    same, linear, geometry."""
+    p6 = table(tmp_path, "straight,0,50,,,\nclothoid,50,90,,,\ncurve_left,90,100,300,40,\n"
+                         "grade,0,30,,,0\nvertical_curve,30,70,,,\ngrade,70,100,,,5\n", name="six.csv")
+    p7 = _t7(tmp_path, "straight,0,50,,,,\nclothoid,50,90,,,,linear\ncurve_left,90,100,300,40,,\n"
+                       "grade,0,30,,,0,\nvertical_curve,30,70,,,,\ngrade,70,100,,,5,\n")
+    a6, a7 = Alignment.read(p6), Alignment.read(p7)
+    assert a6 == a7 and a6.hshape == [0, 0, 0] and a6.vshape == [0, 0, 0]
+    t6, t7 = TrackGeometry(FLAT, a6), TrackGeometry(FLAT, a7)
+    assert t6.design_position(99.0) == t7.design_position(99.0)
+    assert t6.angles(60.0)[1] == pytest.approx(-0.25 / 300, rel=1e-14)  # linear: 10 of 40 m (bloss: 0.156)
 
 
 def test_missing_table_and_bad_header(tmp_path):

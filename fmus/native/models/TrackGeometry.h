@@ -33,6 +33,7 @@ typedef struct {
     size_t nh, nv, np;
     double *hs, *k0, *k1, *c0, *c1, *chi; /* hs, chi: nh + 1 */
     double *vs, *g0, *g1;                 /* vs: nv + 1 */
+    int *hshape, *vshape;                 /* transition shape per element: 0 linear, 1 bloss */
     double *pieces, *P;                   /* np + 1 piece ends, P: 3 (np + 1) */
     int nlines;
     double *omega, *ay, *az, *cpy, *spy, *cpz, *spz; /* cos, sin of the phases */
@@ -53,7 +54,7 @@ typedef struct {
 static void tg_free(TrackGeom *g) {
     if (!g) return;
     free(g->hs), free(g->k0), free(g->k1), free(g->c0), free(g->c1), free(g->chi);
-    free(g->vs), free(g->g0), free(g->g1), free(g->pieces), free(g->P);
+    free(g->vs), free(g->g0), free(g->g1), free(g->pieces), free(g->P), free(g->hshape), free(g->vshape);
     free(g->omega), free(g->ay), free(g->az), free(g->cpy), free(g->spy), free(g->cpz), free(g->spz);
     free(g->ts), free(g->ty), free(g->tm), free(g->kinks);
     memset(g, 0, sizeof *g);
@@ -61,15 +62,16 @@ static void tg_free(TrackGeom *g) {
 
 /* ---- the element table ------------------------------------------------------------------- */
 
-static const char *const TG_COLUMNS[6] = {"kind", "start_m", "end_m", "radius_m", "cant_mm",
-                                          "gradient_permille"};
+static const char *const TG_COLUMNS[7] = {"kind", "start_m", "end_m", "radius_m", "cant_mm",
+                                          "gradient_permille", "transition"};
+static const char *const TG_SHAPES[2] = {"linear", "bloss"};
 enum { TG_STRAIGHT, TG_CLOTHOID, TG_CURVE_LEFT, TG_CURVE_RIGHT, TG_GRADE, TG_VCURVE };
 static const char *const TG_KINDS[6] = {"straight", "clothoid", "curve_left", "curve_right",
                                         "grade", "vertical_curve"};
 
 typedef struct {
     long line;
-    int kind;
+    int kind, shape;
     double start, end, radius, cant, grad;
 } TgRow;
 
@@ -119,6 +121,7 @@ static int tg_read(ModelInstance *m, TrackGeom *g, const char *file) {
     TgRow *H = NULL, *V = NULL, r;
     size_t nh = 0, nv = 0, ch = 0, cv = 0, i;
     long lineno = 0;
+    size_t ncol = 6;
     if (!path) {
         model_error(m, "track_file %s: a relative path needs the FMU's resources folder (use an "
                        "absolute path)", file);
@@ -127,7 +130,7 @@ static int tg_read(ModelInstance *m, TrackGeom *g, const char *file) {
     f = fopen(path, "rb");
     if (!f) TG_FAIL("track_file %s: cannot open (%s)", path, strerror(errno));
     while (fgets(line, sizeof line, f)) {
-        char *fld[7], *s = line, *c;
+        char *fld[8], *s = line, *c;
         size_t nf = 0, j;
         double v[5];
         int has[5];
@@ -140,19 +143,22 @@ static int tg_read(ModelInstance *m, TrackGeom *g, const char *file) {
         for (;;) {
             c = strchr(s, ',');
             if (c) *c = '\0';
-            if (nf < 7) fld[nf] = tg_trim(s);
+            if (nf < 8) fld[nf] = tg_trim(s);
             nf++;
             if (!c) break;
             s = c + 1;
         }
         if (lineno == 1) {
-            for (j = 0; j < 6; j++)
-                if (nf != 6 || strcmp(fld[j], TG_COLUMNS[j]) != 0)
+            for (j = 0; j < nf; j++)
+                if ((nf != 6 && nf != 7) || strcmp(fld[j], TG_COLUMNS[j]) != 0)
                     TG_FAIL("track_file %s, line 1: header must be kind,start_m,end_m,radius_m,"
-                            "cant_mm,gradient_permille", path);
+                            "cant_mm,gradient_permille (and optionally ,transition)", path);
+            ncol = nf;
             continue;
         }
-        if (nf != 6) TG_FAIL("track_file %s, line %ld: %lu fields, expected 6", path, lineno, (unsigned long)nf);
+        if (nf != ncol)
+            TG_FAIL("track_file %s, line %ld: %lu fields, expected %lu", path, lineno, (unsigned long)nf,
+                    (unsigned long)ncol);
         r.line = lineno;
         r.kind = -1;
         for (j = 0; j < 6; j++)
@@ -171,6 +177,18 @@ static int tg_read(ModelInstance *m, TrackGeom *g, const char *file) {
             TG_FAIL("track_file %s, line %ld, column %d (%s): missing", path, lineno, has[0] ? 3 : 2,
                     has[0] ? "end_m" : "start_m");
         r.start = v[0], r.end = v[1], r.radius = v[2], r.cant = v[3], r.grad = v[4];
+        r.shape = 0;
+        if (ncol == 7 && *fld[6]) {
+            r.shape = -1;
+            for (j = 0; j < 2; j++)
+                if (strcmp(fld[6], TG_SHAPES[j]) == 0) r.shape = (int)j;
+            if (r.shape < 0)
+                TG_FAIL("track_file %s, line %ld, column 7 (transition): '%s' is not one of linear, bloss",
+                        path, lineno, fld[6]);
+            if (r.kind != TG_CLOTHOID && r.kind != TG_VCURVE)
+                TG_FAIL("track_file %s, line %ld, column 7 (transition): only clothoid and vertical_curve "
+                        "rows take a transition shape, not a %s", path, lineno, TG_KINDS[r.kind]);
+        }
         {
             const int horizontal = r.kind <= TG_CURVE_RIGHT;
             const size_t n = horizontal ? nh : nv;
@@ -211,13 +229,16 @@ static int tg_read(ModelInstance *m, TrackGeom *g, const char *file) {
     g->c0 = (double *)calloc(nh, sizeof(double)), g->c1 = (double *)calloc(nh, sizeof(double));
     g->vs = (double *)calloc(nv + 1, sizeof(double));
     g->g0 = (double *)calloc(nv, sizeof(double)), g->g1 = (double *)calloc(nv, sizeof(double));
-    if (!g->hs || !g->chi || !g->k0 || !g->k1 || !g->c0 || !g->c1 || !g->vs || !g->g0 || !g->g1)
+    g->hshape = (int *)calloc(nh, sizeof(int)), g->vshape = (int *)calloc(nv, sizeof(int));
+    if (!g->hs || !g->chi || !g->k0 || !g->k1 || !g->c0 || !g->c1 || !g->vs || !g->g0 || !g->g1 ||
+        !g->hshape || !g->vshape)
         TG_FAIL("track_file %s: out of memory", path);
     for (i = 0; i < nh; i++) {
         /* curvature and signed cant at the element's ends */
         double k = 0.0, c = 0.0;
         const TgRow *e = &H[i];
         g->hs[i + 1] = e->end;
+        g->hshape[i] = e->shape;
         if (e->kind == TG_CLOTHOID) {
             const TgRow *a = i ? &H[i - 1] : NULL, *b = i + 1 < nh ? &H[i + 1] : NULL;
             double ka, kb, ca, cb;
@@ -242,6 +263,7 @@ static int tg_read(ModelInstance *m, TrackGeom *g, const char *file) {
     for (i = 0; i < nv; i++) {
         const TgRow *e = &V[i];
         g->vs[i + 1] = e->end;
+        g->vshape[i] = e->shape;
         if (e->kind == TG_VCURVE) {
             if (!i || i + 1 >= nv || V[i - 1].kind != TG_GRADE || V[i + 1].kind != TG_GRADE)
                 TG_FAIL("track_file %s, line %ld, column 1 (kind): a vertical_curve needs a grade on both "
@@ -384,16 +406,31 @@ typedef struct {
     double chi, k, dk, g, dg, c, dc;
 } TgAngles;
 
+/* the shapes of models/track_geometry.py, in the same arithmetic */
 static void tg_angles(const TrackGeom *G, double s, TgAngles *a) {
     const size_t i = tg_find(G->hs, G->nh, s), j = tg_find(G->vs, G->nv, s);
     const double L = G->hs[i + 1] - G->hs[i], u = s - G->hs[i], Lv = G->vs[j + 1] - G->vs[j];
-    a->dk = (G->k1[i] - G->k0[i]) / L;
-    a->chi = G->chi[i] + u * (G->k0[i] + 0.5 * a->dk * u);
-    a->k = G->k0[i] + a->dk * u;
-    a->dc = (G->c1[i] - G->c0[i]) / L;
-    a->c = G->c0[i] + a->dc * u;
-    a->dg = (G->g1[j] - G->g0[j]) / Lv;
-    a->g = G->g0[j] + a->dg * (s - G->vs[j]);
+    if (G->hshape[i]) { /* bloss: f = x^2 (3 - 2 x), f' = 6 x (1 - x) / L */
+        const double x = u / L, f = x * x * (3.0 - 2.0 * x), f1 = 6.0 * x * (1.0 - x) / L;
+        const double Dk = G->k1[i] - G->k0[i], Dc = G->c1[i] - G->c0[i];
+        a->chi = G->chi[i] + u * G->k0[i] + Dk * L * (x * x * x * (1.0 - 0.5 * x));
+        a->k = G->k0[i] + Dk * f, a->dk = Dk * f1;
+        a->c = G->c0[i] + Dc * f, a->dc = Dc * f1;
+    } else {
+        a->dk = (G->k1[i] - G->k0[i]) / L;
+        a->chi = G->chi[i] + u * (G->k0[i] + 0.5 * a->dk * u);
+        a->k = G->k0[i] + a->dk * u;
+        a->dc = (G->c1[i] - G->c0[i]) / L;
+        a->c = G->c0[i] + a->dc * u;
+    }
+    if (G->vshape[j]) {
+        const double x = (s - G->vs[j]) / Lv, Dg = G->g1[j] - G->g0[j];
+        a->g = G->g0[j] + Dg * (x * x * (3.0 - 2.0 * x));
+        a->dg = Dg * (6.0 * x * (1.0 - x) / Lv);
+    } else {
+        a->dg = (G->g1[j] - G->g0[j]) / Lv;
+        a->g = G->g0[j] + a->dg * (s - G->vs[j]);
+    }
 }
 
 static void tg_tangent(const TrackGeom *G, double s, double T[3]) {
