@@ -45,8 +45,8 @@ Measured on a 32 km run of the shipped line (``tests/test_running_resistance.py`
 where every form is well conditioned, this filter equals filterpy's
 ``UnscentedKalmanFilter`` to 1.4e-9 standard deviations; at the paper's settings filterpy's
 textbook sums differ from it by up to 8e-4 σ, the centre-referenced form in SI coordinates by
-8e-5 σ. The posterior covariance is symmetrised; if it still lost positive definiteness the
-step would raise a ``FloatingPointError`` naming the time (never a silent wrong answer).
+8e-5 σ. The covariance is symmetrised; where a clamping process model makes it singular (a stopped
+train) its eigenvalues are floored and the repair is counted (``covariance_repairs``).
 """
 
 from __future__ import annotations
@@ -227,6 +227,8 @@ class PaperUKF(Observer):
         self._t_meas: float | None = None
         self._t_post = self._t0
         self._started = False
+        self.repairs = 0
+        self.first_repair: float | None = None
 
     def _predict(self) -> None:
         self._pending += 1  # made once the next fix gives the effort (module docstring)
@@ -239,6 +241,7 @@ class PaperUKF(Observer):
             X = self.points.sigma_points(self.x, self.P)
             self.x, self.P = ukf.unscented_transform(self._f(X), self.points, self.Q)
             self._t_post += self.dt
+            self._ensure_positive_definite(self._t_post)
         self._pending = 0
 
     def _effort(self, v_meas: float, t: float) -> float:
@@ -269,14 +272,29 @@ class PaperUKF(Observer):
         self.a = float(acceleration(xs[None, :], self.u, self.line(xs[:1]))[0])
         up = ukf.update(self.x, self.P, z / self.D[:2], self._h, self.R, self.points, mask)
         self.x, self.P = up.x, up.P
-        self._check(t)
+        self._ensure_positive_definite(t)
 
-    def _check(self, t: float) -> None:
+    def _ensure_positive_definite(self, t: float) -> None:
+        """Sigma points need a Cholesky factor. A process model that clamps the speed at 0 (the
+        FMU's and the ODE's: a braked train does not roll back) maps every sigma point of a
+        stopped train to v = 0, and the predicted covariance is then singular. Its eigenvalues are
+        floored at 1e-12 of the largest (in the scaled coordinates, where they start at 1): the
+        speed of a stopped train is known to 1e-6 of its initial sigma. Counted in
+        :meth:`finish` (``covariance_repairs``, ``first_repair_s``), never silent."""
         try:
             np.linalg.cholesky(self.P)
+            return
         except np.linalg.LinAlgError:
-            raise FloatingPointError(f"{type(self).__name__}: the covariance lost positive definiteness at "
-                                     f"t = {t:g} s") from None
+            pass
+        w, V = np.linalg.eigh(self.P)
+        if not np.isfinite(w).all():
+            raise FloatingPointError(f"{type(self).__name__}: the covariance is not finite at t = {t:g} s")
+        w = np.maximum(w, 1e-12 * max(w.max(), 1e-300))
+        self.P = (V * w) @ V.T
+        self.P = 0.5 * (self.P + self.P.T)
+        self.repairs += 1
+        if self.first_repair is None:
+            self.first_repair = t
 
     def _estimate(self) -> np.ndarray:
         if self._pending and self._started:
@@ -291,7 +309,8 @@ class PaperUKF(Observer):
 
     def finish(self) -> dict:
         return {**super().finish(), "alpha": self.points.alpha, "kappa": self.points.kappa,
-                "centre_weight": float(self.points.Wc[0])}
+                "centre_weight": float(self.points.Wc[0]), "covariance_repairs": self.repairs,
+                "first_repair_s": self.first_repair}
 
 
 # ---- the improved estimator: coasting segments, a prior, a kinematic filter ---------------------

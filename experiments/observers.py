@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import importlib
 import math
+import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -182,6 +183,7 @@ class _Feed:
     last_z: np.ndarray | None = None
     estimate: np.ndarray | None = None
     seconds: float = 0.0
+    failed: str | None = None  # why the estimator stopped (its estimates are NaN from then on)
 
     def sample(self, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:
         """``(Z, U, mask)`` of recorded rows (2-D) in the observer's units; mask None: as finite."""
@@ -277,10 +279,14 @@ class ObserverBank:
             if k == 0 and f.iset:
                 bind_settings(f, row, f.iset, self.where)
                 f.obs.reset(0.0)
-            if k % f.stride == 0:
+            if k % f.stride == 0 and f.failed is None:
                 Z, U, mask = f.sample(row[None, :])
                 t0 = time.perf_counter()
-                f.estimate = f.obs.step(t, Z[0], None if U is None else U[0], None if mask is None else mask[0])
+                try:
+                    f.estimate = f.obs.step(t, Z[0], None if U is None else U[0],
+                                            None if mask is None else mask[0])
+                except (ArithmeticError, ValueError) as exc:  # numerical failure (LinAlgError is a ValueError)
+                    self._fail(f, t, exc)
                 f.seconds += time.perf_counter() - t0
         est = np.concatenate([f.estimate for f in self.online]) if self.online else np.empty(0)
         self.times.append(t)
@@ -289,6 +295,14 @@ class ObserverBank:
             self._record.append(row[self._kept])
         if self.recorder is not None:
             self.recorder.write(np.concatenate(([t], est)))
+
+    def _fail(self, f: _Feed, t: float, exc: Exception) -> None:
+        """One estimator that fails numerically does not end the run nor lose the others'
+        results: its estimates are NaN from ``t`` on, and the CLI and metrics.json say why."""
+        f.failed = f"{type(exc).__name__} at t = {t:g} s: {exc}".splitlines()[0]
+        f.estimate = np.full(len(f.obs.outputs), np.nan)
+        print(f"railfmu: warning: {self.where}: Observer {f.spec.name!r} failed ({f.failed}); its estimates "
+              "are NaN from there on", file=sys.stderr)
 
     def write_block(self, rows: np.ndarray) -> None:
         for row in rows:
@@ -365,6 +379,8 @@ class ObserverBank:
     @staticmethod
     def _scores(f: _Feed, t: np.ndarray, est: np.ndarray, n0: int, signals: dict) -> dict:
         m: dict = dict(f.obs.finish())
+        if f.failed:
+            m["failed"] = f.failed
         if f.bound:
             m["settings_from_signals"] = dict(f.bound)
         rows = np.arange(0, len(t), f.stride)

@@ -48,6 +48,15 @@ class EventEcho(Echo):
     event_driven = True
 
 
+class Diverging(Echo):
+    """Fails numerically at its 51st sample, as a filter whose covariance is lost would."""
+
+    def _update(self, z, mask):
+        super()._update(z, mask)
+        if self.steps == 50:
+            raise FloatingPointError("the covariance is not finite")
+
+
 class RecordMean(OfflineObserver):
     """Offline: the mean of each measurement over the samples where it is present, and the
     number of samples, at every time of the record."""
@@ -312,3 +321,18 @@ def test_export_keeps_the_observer_declarations(fmu_dir, tmp_path):
                {k: (u.name, u.exponents) for k, u in b.units.items()}
     assert again.observers[0].units["sensors.y_1"].factor == 1e-3  # mm/s2, defined in the exported ssd:Units
     ObserverBank(again, None)  # the unit checks pass on the exported system
+
+
+def test_a_failing_observer_neither_ends_the_run_nor_loses_the_others(fmu_dir, tmp_path, capsys):
+    """One estimator raising a numerical error mid-run: its estimates are NaN from that sample
+    on, the others and the signals are complete, and the warning and metrics.json say why."""
+    system = system_of(tmp_path, fmu_dir, observer() + observer(name="bad", cls="Diverging"))
+    sig, bank = run_bank(system, tmp_path)
+    good, bad = columns(bank, "echo"), columns(bank, "bad")
+    assert np.isfinite(good["a"]).all() and len(sig["time"]) == 201
+    assert np.array_equal(bad["b"][:50], good["b"][:50]) and np.isnan(bad["b"][50:]).all()
+    m = bank.metrics(sig)
+    assert m["bad"]["failed"] == "FloatingPointError at t = 0.05 s: the covariance is not finite"
+    assert "failed" not in m["echo"]
+    err = capsys.readouterr().err
+    assert "Observer 'bad' failed (FloatingPointError at t = 0.05 s" in err and "Traceback" not in err
