@@ -405,9 +405,12 @@ class ImprovedEstimator(Observer):
        train coasts in an accepted (open) segment, the speed output at a fix is instead the
        segment's fit (C2) there, ``c^ - Phi_j^T theta^ - sum dt g`` with ``c^`` the least
        squares initial speed given ``theta^``: it averages every reading of the segment
-       instead of following the 1 km/h rounding. The outputs ``acceleration`` = ``a^``
-       (in coasting ``-(r^(v^) + g)``) and ``effort`` = ``a^ + r^(v^) + g(s^)`` (eq. 1
-       solved for the effort; 0 in coasting).
+       instead of following the 1 km/h rounding. The output ``acceleration`` is the mean
+       acceleration of the interval that ends at the last fix, ``(v^_k - v^_{k-1}) /
+       (t_k - t_{k-1})`` from the filter's speeds (what the regime recognition of §3.2 and
+       the features read: the interval's regime; the state ``a^`` lags it, and scored 0.75
+       regime accuracy against 0.92 over 20 runs), in coasting ``-(r^(v^) + g)``; ``effort``
+       = ``acceleration + r^(v^) + g(s^)`` (eq. 1 solved for the effort; 0 in coasting).
 
     Tuning (on simulated 32 km runs of the shipped line with 10 % per-run scatter of each
     Davis coefficient, seeds 1001-1040, not the study's): ``effort_band`` 0.04 N/kg (the
@@ -486,6 +489,8 @@ class ImprovedEstimator(Observer):
         self.x = np.zeros(3)
         self.P = np.diag([1e6, 1e4, 1.0])  # replaced by the first fix; a: 1 m/s2
         self._started = False
+        self.a_interval: float | None = None
+        self._fix_prev: tuple[float, float] | None = None
         self.fix_t: list[float] = []  # the fixes with both channels (the regression's data)
         self.fix_s: list[float] = []
         self.fix_v: list[float] = []
@@ -528,9 +533,14 @@ class ImprovedEstimator(Observer):
             self.x, self.P = up.x, up.P
         if mask.all():  # a fix with a channel missing only lengthens the regression's interval
             self._add_fix(self._t, float(z[0]), float(z[1]))
+            if self._fix_prev is not None and self._t > self._fix_prev[0]:
+                self.a_interval = (self.x[1] - self._fix_prev[1]) / (self._t - self._fix_prev[0])
+            self._fix_prev = (self._t, float(self.x[1]))
 
     def _estimate(self) -> np.ndarray:
         s, v, a = self.x
+        if self.a_interval is not None:
+            a = self.a_interval
         th = self.theta
         if self.v_coast is not None and self._t == self.fix_t[-1]:
             v = self.v_coast
