@@ -461,7 +461,7 @@ def build() -> Model:
                     "increments by exact quadrature and the true navigation state",
         parameters=parameters, outputs=outputs,
         default_experiment=(0.0, 700.0, 0.005),
-        c_sources=["Earth.h", "TrackGeometry.h", "Trolley.c"],
+        c_sources=["CsvCell.h", "Earth.h", "TrackGeometry.h", "Trolley.c"],
         resources={"trolley_track.csv": DEFAULT_TRACK},
         documentation=__doc__ + "\n\n" + track_geometry.__doc__,
     )

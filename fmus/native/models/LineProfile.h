@@ -22,6 +22,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "CsvCell.h"
 #include "model.h"
 
 #if defined(__GNUC__)
@@ -48,27 +49,6 @@ static void line_free(LineProfile *p) {
     free(p);
 }
 
-static char *line_trim(char *s) {
-    char *e;
-    while (*s == ' ' || *s == '\t') s++;
-    e = s + strlen(s);
-    while (e > s && (e[-1] == ' ' || e[-1] == '\t' || e[-1] == '\r')) *--e = '\0';
-    return s;
-}
-
-/* strtod in the "C" locale sense (the importer may have set a comma locale). */
-static int line_number(const char *f, double *x) {
-    char buf[128], *end, *q;
-    const char dp = localeconv()->decimal_point[0];
-    if (!*f || strlen(f) >= sizeof buf) return 1;
-    strcpy(buf, f);
-    if (dp != '.')
-        for (q = buf; *q; q++)
-            if (*q == '.') *q = dp;
-    *x = strtod(buf, &end);
-    if (end == buf || *end != '\0' || !isfinite(*x)) return 1;
-    return 0;
-}
 
 static const char *const LINE_COLUMNS[4] = {"position_m", "gradient_permille", "speed_limit_kmh",
                                             "curve_radius_m"};
@@ -115,11 +95,11 @@ static LineProfile *line_load(ModelInstance *m, const char *file) {
             (unsigned char)s[2] == 0xBF)
             s += 3;
         s[strcspn(s, "\n")] = '\0';
-        if (*line_trim(s) == '\0') continue;
+        if (*csv_trim(s) == '\0') continue;
         for (;;) {
             c = strchr(s, ',');
             if (c) *c = '\0';
-            if (nf < 5) fld[nf] = line_trim(s);
+            if (nf < 5) fld[nf] = csv_trim(s);
             nf++;
             if (!c) break;
             s = c + 1;
@@ -141,7 +121,7 @@ static LineProfile *line_load(ModelInstance *m, const char *file) {
             continue;
         }
         for (j = 0; j < ncol; j++)
-            if (line_number(fld[j], &v[j])) {
+            if (csv_number(fld[j], &v[j])) {
                 model_error(m, "line_file %s, line %ld, column %lu (%s): '%s' is not a finite number",
                             path, lineno, (unsigned long)j + 1, LINE_COLUMNS[j], fld[j]);
                 goto fail;

@@ -14,6 +14,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "CsvCell.h"
 #include "Earth.h"
 #include "model.h"
 
@@ -75,26 +76,6 @@ typedef struct {
     double start, end, radius, cant, grad;
 } TgRow;
 
-static char *tg_trim(char *s) {
-    char *e;
-    while (*s == ' ' || *s == '\t') s++;
-    e = s + strlen(s);
-    while (e > s && (e[-1] == ' ' || e[-1] == '\t' || e[-1] == '\r')) *--e = '\0';
-    return s;
-}
-
-/* strtod in the "C" locale sense; 1 = not a finite number */
-static int tg_number(const char *f, double *x) {
-    char buf[128], *end, *q;
-    const char dp = localeconv()->decimal_point[0];
-    if (!*f || strlen(f) >= sizeof buf) return 1;
-    strcpy(buf, f);
-    if (dp != '.')
-        for (q = buf; *q; q++)
-            if (*q == '.') *q = dp;
-    *x = strtod(buf, &end);
-    return end == buf || *end != '\0' || !isfinite(*x);
-}
 
 static int tg_push(TgRow **rows, size_t *n, size_t *cap, const TgRow *r) {
     if (*n == *cap) {
@@ -139,11 +120,11 @@ static int tg_read(ModelInstance *m, TrackGeom *g, const char *file) {
             (unsigned char)s[2] == 0xBF)
             s += 3;
         s[strcspn(s, "\n")] = '\0';
-        if (*tg_trim(s) == '\0') continue;
+        if (*csv_trim(s) == '\0') continue;
         for (;;) {
             c = strchr(s, ',');
             if (c) *c = '\0';
-            if (nf < 8) fld[nf] = tg_trim(s);
+            if (nf < 8) fld[nf] = csv_trim(s);
             nf++;
             if (!c) break;
             s = c + 1;
@@ -169,7 +150,7 @@ static int tg_read(ModelInstance *m, TrackGeom *g, const char *file) {
         for (j = 0; j < 5; j++) {
             has[j] = *fld[j + 1] != '\0';
             v[j] = 0.0;
-            if (has[j] && tg_number(fld[j + 1], &v[j]))
+            if (has[j] && csv_number(fld[j + 1], &v[j]))
                 TG_FAIL("track_file %s, line %ld, column %lu (%s): '%s' is not a finite number", path,
                         lineno, (unsigned long)j + 2, TG_COLUMNS[j + 1], fld[j + 1]);
         }
@@ -312,11 +293,11 @@ static int tg_read_table(ModelInstance *m, TrackGeom *g, const char *file) {
         size_t nf = 0;
         lineno++;
         s[strcspn(s, "\n")] = '\0';
-        if (lineno > 1 && *tg_trim(s) == '\0') continue;
+        if (lineno > 1 && *csv_trim(s) == '\0') continue;
         for (;;) {
             q = strchr(s, ',');
             if (q) *q = '\0';
-            if (nf < 5) fld[nf] = tg_trim(s);
+            if (nf < 5) fld[nf] = csv_trim(s);
             nf++;
             if (!q) break;
             s = q + 1;
@@ -340,7 +321,7 @@ static int tg_read_table(ModelInstance *m, TrackGeom *g, const char *file) {
         }
         for (c = 0; c < 4; c++) {
             double x;
-            if (tg_number(fld[c], &x)) TG_FAIL("irregularity_file %s:%ld: not a number: '%s'", path, lineno, fld[c]);
+            if (csv_number(fld[c], &x)) TG_FAIL("irregularity_file %s:%ld: not a number: '%s'", path, lineno, fld[c]);
             if (c == 0) g->ts[n] = x;
             else g->ty[3 * n + c - 1] = x;
         }
