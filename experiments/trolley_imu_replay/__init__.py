@@ -20,8 +20,8 @@ from pathlib import Path
 import numpy as np
 
 from experiments.study_protocol import RunData, Study, observers_md, output
-from experiments.trolley_survey import (ERRORS, INCREMENTS, NAV, UNITS, error_metrics, metric_name,
-                                        navigation_errors)
+from experiments.trolley_survey import (ERRORS, INCREMENTS, NAV, UNITS, error_metrics, ins_error_figure,
+                                        metric_name, navigation_errors)
 
 DEG = math.pi / 180
 #: truth.csv's channels on the truth table: (column, NAV name or None, factor to rad/m/(m/s))
@@ -60,16 +60,8 @@ class TrolleyImuReplay(Study):
         return error_metrics(t, navigation_errors(est, true), start)
 
     def figures(self, run: RunData, out: Path) -> list[str]:
-        from experiments.plots import figure
-
         t, est, true = _arrays(run)
-        e = navigation_errors(est, true)
-        axes = [[(f"position {c}", 1e3 * e["position"][:, j], "mm") for j, c in enumerate("NED")],
-                [(f"velocity {c}", 1e3 * e["velocity"][:, j], "mm/s") for j, c in enumerate("NED")],
-                [(f"attitude {c}", np.degrees(e["attitude"][:, j]), "deg") for j, c in
-                 enumerate(("tilt N", "tilt E", "heading"))]]
-        return [figure(out, "ins_errors.png", "Free-inertial INS errors on the replayed IMU (INS minus truth)",
-                       t, "time [s]", axes)]
+        return [ins_error_figure(out, "Free-inertial INS errors on the replayed IMU (INS minus truth)", t, est, true)]
 
     def report_md(self, metrics: dict) -> str:
         L = ["## Free-inertial INS on the replayed IMU, against truth.csv", "",

@@ -99,6 +99,19 @@ def error_metrics(t: np.ndarray, errors: dict[str, np.ndarray], motion_start: fl
     return out
 
 
+
+def ins_error_figure(out: Path, title: str, t: np.ndarray, est: np.ndarray, true: np.ndarray) -> str:
+    """``ins_errors.png``: position and velocity errors (N, E, D) and attitude errors (tilt N,
+    tilt E, heading) of the INS against the truth over time."""
+    from experiments.plots import figure
+
+    e = navigation_errors(est, true)
+    axes = [[(f"position {c}", 1e3 * e["position"][:, j], "mm") for j, c in enumerate("NED")],
+            [(f"velocity {c}", 1e3 * e["velocity"][:, j], "mm/s") for j, c in enumerate("NED")],
+            [(f"attitude {c}", np.degrees(e["attitude"][:, j]), "deg") for j, c in
+             enumerate(("tilt N", "tilt E", "heading"))]]
+    return figure(out, "ins_errors.png", title, t, "time [s]", axes)
+
 def _arrays(run: RunData) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Times, INS estimates (n, 9) and truth (n, 9) on the INS's rows."""
     t = np.asarray(run.estimates["time"])
@@ -201,13 +214,7 @@ class TrolleySurvey(Study):
                              [("stopped", np.asarray(s[r["true_stopped"]]), "0/1")],
                              [("distance", dist, "m")]]))
         t, est, true = _arrays(run)
-        e = navigation_errors(est, true)
-        axes = [[(f"position {c}", 1e3 * e["position"][:, j], "mm") for j, c in enumerate("NED")],
-                [(f"velocity {c}", 1e3 * e["velocity"][:, j], "mm/s") for j, c in enumerate("NED")],
-                [(f"attitude {c}", np.degrees(e["attitude"][:, j]), "deg") for j, c in
-                 enumerate(("tilt N", "tilt E", "heading"))]]
-        files.append(figure(out, "ins_errors.png", "Free-inertial INS errors (INS minus truth)", t, "time [s]",
-                            axes))
+        files.append(ins_error_figure(out, "Free-inertial INS errors (INS minus truth)", t, est, true))
         return files
 
     def report_md(self, metrics: dict) -> str:
