@@ -31,4 +31,19 @@ static int csv_number(const char *f, double *x) {
     return end == buf || *end != '\0' || !isfinite(*x);
 }
 
+/* splits a line (in place) at its commas into trimmed fields: the first `max` go to `fld`;
+ * returns the number of fields, which may exceed `max` (a row with too many fields) */
+static size_t csv_split(char *s, char **fld, size_t max) {
+    size_t nf = 0;
+    char *c;
+    for (;;) {
+        c = strchr(s, ',');
+        if (c) *c = '\0';
+        if (nf < max) fld[nf] = csv_trim(s);
+        nf++;
+        if (!c) return nf;
+        s = c + 1;
+    }
+}
+
 #endif

@@ -87,8 +87,8 @@ static LineProfile *line_load(ModelInstance *m, const char *file) {
     }
     p = (LineProfile *)calloc(1, sizeof *p);
     while (p && fgets(line, sizeof line, f)) {
-        char *fld[5], *s = line, *c;
-        size_t nf = 0, j;
+        char *fld[5], *s = line;
+        size_t nf, j;
         double v[4] = {0, 0, 0, 0};
         lineno++;
         if (lineno == 1 && (unsigned char)s[0] == 0xEF && (unsigned char)s[1] == 0xBB &&
@@ -96,14 +96,7 @@ static LineProfile *line_load(ModelInstance *m, const char *file) {
             s += 3;
         s[strcspn(s, "\n")] = '\0';
         if (*csv_trim(s) == '\0') continue;
-        for (;;) {
-            c = strchr(s, ',');
-            if (c) *c = '\0';
-            if (nf < 5) fld[nf] = csv_trim(s);
-            nf++;
-            if (!c) break;
-            s = c + 1;
-        }
+        nf = csv_split(s, fld, 5);
         if (lineno == 1 && nf == 4) ncol = 4;
         if (nf != ncol) {
             model_error(m, "line_file %s, line %ld: %lu fields, expected %lu (%s,%s,%s[,%s])", path,

@@ -111,8 +111,8 @@ static int tg_read(ModelInstance *m, TrackGeom *g, const char *file) {
     f = fopen(path, "rb");
     if (!f) TG_FAIL("track_file %s: cannot open (%s)", path, strerror(errno));
     while (fgets(line, sizeof line, f)) {
-        char *fld[8], *s = line, *c;
-        size_t nf = 0, j;
+        char *fld[8], *s = line;
+        size_t nf, j;
         double v[5];
         int has[5];
         lineno++;
@@ -121,14 +121,7 @@ static int tg_read(ModelInstance *m, TrackGeom *g, const char *file) {
             s += 3;
         s[strcspn(s, "\n")] = '\0';
         if (*csv_trim(s) == '\0') continue;
-        for (;;) {
-            c = strchr(s, ',');
-            if (c) *c = '\0';
-            if (nf < 8) fld[nf] = csv_trim(s);
-            nf++;
-            if (!c) break;
-            s = c + 1;
-        }
+        nf = csv_split(s, fld, 8);
         if (lineno == 1) {
             for (j = 0; j < nf; j++)
                 if ((nf != 6 && nf != 7) || strcmp(fld[j], TG_COLUMNS[j]) != 0)
@@ -289,19 +282,12 @@ static int tg_read_table(ModelInstance *m, TrackGeom *g, const char *file) {
         return 1;
     }
     while (fgets(line, sizeof line, f)) {
-        char *fld[5], *s = line, *q;
-        size_t nf = 0;
+        char *fld[5], *s = line;
+        size_t nf;
         lineno++;
         s[strcspn(s, "\n")] = '\0';
         if (lineno > 1 && *csv_trim(s) == '\0') continue;
-        for (;;) {
-            q = strchr(s, ',');
-            if (q) *q = '\0';
-            if (nf < 5) fld[nf] = csv_trim(s);
-            nf++;
-            if (!q) break;
-            s = q + 1;
-        }
+        nf = csv_split(s, fld, 5);
         if (lineno == 1) {
             for (c = 0; c < 4 && nf == 4; c++)
                 if (strcmp(fld[c], header[c]) != 0) break;
