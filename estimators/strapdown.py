@@ -237,6 +237,28 @@ class Strapdown:
         self.c_q3 = (t - q3) - y
         self.q3 = t
 
+    def set_state(self, lat: float | None = None, lon: float | None = None, height: float | None = None,
+                  v_ned=None, q=None) -> None:
+        """Replace parts of the state (an aided filter's error feedback): latitude, longitude
+        (rad), height (m), NED velocity (m/s), attitude quaternion of C_b^n (scalar first,
+        normalised here). Each part set drops its compensation term (the rounding carried in
+        it belonged to the old value); the mid-interval latitude extrapolation moves with a
+        corrected latitude so the feedback does not masquerade as a velocity."""
+        if lat is not None:
+            self.lat_prev += float(lat) - self.lat
+            self.lat, self.c_lat = float(lat), 0.0
+        if lon is not None:
+            self.lon, self.c_lon = float(lon), 0.0
+        if height is not None:
+            self.h, self.c_h = float(height), 0.0
+        if v_ned is not None:
+            self.vn, self.ve, self.vd = (float(v) for v in v_ned)
+        if q is not None:
+            q = np.asarray(q, dtype=float)
+            q = q / np.linalg.norm(q)
+            self.q0, self.q1, self.q2, self.q3 = (float(x) for x in q)
+            self.c_q0 = self.c_q1 = self.c_q2 = self.c_q3 = 0.0
+
     def rph(self) -> tuple[float, float, float]:
         """(roll, pitch, heading) (rad) of the current attitude; heading in (-pi, pi]."""
         q0, q1, q2, q3 = self.q0, self.q1, self.q2, self.q3

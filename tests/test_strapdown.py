@@ -471,3 +471,21 @@ def test_observer_binds_as_an_ssd_observer():
     spec.settings["alignment"] = "fine"
     with pytest.raises(UserError, match="bad settings: StrapdownINS: alignment must be"):
         make_observer(spec, DT, "trolley_survey")
+
+
+def test_set_state_is_the_feedback_of_an_aided_filter():
+    """set_state replaces position, velocity and attitude exactly, and integrating on from the
+    replaced state equals an INS started there (the compensation terms were dropped)."""
+    dt = 0.005
+    rng = np.random.default_rng(3)
+    inc = np.column_stack([rng.normal(0, 1e-5, (400, 3)), rng.normal(0, 1e-4, (400, 3)) + [0, 0, -9.8 * dt]])
+    a = Strapdown.from_rph(0.5, 2.0, 30.0, (1.0, 0.5, 0.0), (0.01, -0.02, 0.8), dt)
+    a.integrate(inc[:200])
+    q = np.array([0.9, 0.1, -0.2, 0.3])
+    a.set_state(lat=0.50001, lon=2.00002, height=31.0, v_ned=(0.9, 0.4, 0.01), q=q)
+    assert (a.lat, a.lon, a.h, a.vn, a.ve, a.vd) == (0.50001, 2.00002, 31.0, 0.9, 0.4, 0.01)
+    np.testing.assert_allclose(a.quaternion(), q / np.linalg.norm(q), rtol=0, atol=1e-16)
+    b = Strapdown(0.50001, 2.00002, 31.0, (0.9, 0.4, 0.01), q, dt)
+    b.lat_prev = a.lat_prev
+    b.prime(inc[199, :3], inc[199, 3:])
+    np.testing.assert_array_equal(a.integrate(inc[200:]), b.integrate(inc[200:]))
