@@ -484,12 +484,10 @@ class AidedInsSmoother(OfflineObserver, SmootherRecord):
         flag = mask[:, 0] & (np.nan_to_num(Z[:, 0]) >= 0.5)
         if self.s["zupt_source"] == "flag":
             return flag
-        try:
-            from estimators.zupt_detector import detect_stationary, detector_scores
-        except ImportError as exc:
-            raise ValueError("AidedInsSmoother: zupt_source 'detector' needs estimators.zupt_detector "
-                             f"(detect_stationary, detector_scores), which is not available: {exc}") from None
-        detected = np.asarray(detect_stationary(U, self.dt), dtype=bool)
+        from estimators.zupt_detector import detect_stationary, detector_scores, noise_sigmas
+        sigmas = noise_sigmas({k: v for k, v in self.s.items() if k in _GRADE_NAMES}, self.dt)
+        detected = np.asarray(detect_stationary(U, self.dt, **({"sigma_a": sigmas[0], "sigma_g": sigmas[1]}
+                                                              if min(sigmas) > 0 else {})), dtype=bool)
         self.detector = dict(detector_scores(detected, flag))
         return detected
 
