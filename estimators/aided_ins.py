@@ -4,23 +4,31 @@ the run (eq. 12), sampling of the smoother's joint error distribution, and the s
 recursions without data (the paper's covariance analysis, §5).
 
 Forward pass. The :class:`~estimators.strapdown.Strapdown` integrates the measured increments at
-the IMU rate (``Strapdown.integrate`` on the chunk of each KF epoch); the error covariance runs at
-the epochs ``t_k`` (``filter_period`` apart) with the error model of
-:mod:`estimators.ins_error_model` (``A`` held at the epoch's mean specific force
+the IMU rate; the error covariance runs at the epochs ``t_k`` (``filter_period`` apart) with the
+error model of :mod:`estimators.ins_error_model` (``A`` held at the epoch's mean specific force
 ``f^n = (v_k - v_{k-1}) / T - g^n + (2 omega_ie + omega_en) x v``, exact for the mechanisation,
-and its mid-epoch attitude)::
+and its mid-epoch attitude, latitude, height and velocity)::
 
     b_k = Phi_{k-1} a_{k-1},     P-_k = Phi_{k-1} P+_{k-1} Phi_{k-1}^T + Q_{k-1}     (eq. 11)
     x+_k = b_k + K_k (z_k - H_k b_k),  P+_k Joseph form            (estimators.kalman.update)
-    c_k = (x+_k of phi, dv, dr; 0 for the biases),   a_k = x+_k - c_k                feedback
+    c_k = (x+_k of phi, dv, dr; 0 for the biases) at a feedback epoch, else 0
+    a_k = x+_k - c_k
 
-Reset convention: the navigation part ``c_k`` of the estimate is fed back into the INS at every
-epoch (``Strapdown.set_state``: ``C <- exp([phi x]) C``, ``v <- v - dv``, position moved by
-``-dr``), after which the navigation error estimate is zero; the bias estimates stay in the
-filter's state ``a_k`` (the INS integrates the raw increments) and act through ``Phi`` on the
-next prediction, which is fed back in its turn. The covariance is unchanged by the reset (its
-Jacobian ``I - [phi/2 x]`` differs from I by < 1e-4). Without feedback (``feedback=False``)
-``c_k = 0`` and this is the textbook open-loop filter around the free INS.
+The epochs go in blocks of :data:`BLOCK` (20: 1 s at the default epoch): the INS integrates a
+block's increments in one ``Strapdown.integrate`` call, ``Phi`` and ``Q`` of its epochs are
+formed stacked, then the covariance recursion and the updates loop over its epochs.
+
+Reset convention: at the last epoch of each block the navigation part ``c_k`` of the estimate
+is fed back into the INS (``Strapdown.set_state``: ``C <- exp([phi x]) C``, ``v <- v - dv``,
+position moved by ``-dr``), after which the navigation error estimate is zero; the bias
+estimates stay in the filter's state ``a_k`` (the INS integrates the raw increments) and act
+through ``Phi`` on the predictions, which are fed back at the next block's end. Within a block
+the filter runs open loop about the INS: over 1 s the nominal moves from the corrected one by
+(error rate) x 1 s, and the linearisation error is the square of that, ~1e-9 of the error
+itself. The covariance is unchanged by the reset (its Jacobian ``I - [phi/2 x]`` differs from
+I by < 1e-4). Without feedback (``feedback=False``) ``c_k = 0`` everywhere and this is the
+textbook open-loop filter around the free INS; the two agree to 0.2 mm over 40 s while the free
+INS drifts 0.6 m (``tests/test_aided_ins.py``).
 
 Backward pass (RTS, eq. 12) on the errors relative to the *fed-back* nominal ``n_k^+``: the
 INS carries ``n_k^+`` to ``n_{k+1}^-``, so ``Phi_k`` maps errors of ``n_k^+`` to errors of
@@ -81,12 +89,30 @@ Measurements (the observer's ``measurements``; NaN or masked: absent):
   the error moves by ``dv (t_k - t_j)`` < 1e-5 m in between). A fix held over consecutive
   samples (the same three values) is one fix, used once.
 
-Memory: per epoch the record holds ``Phi``, ``P-``, ``P+``, ``C``, ``P^s`` (``n^2`` floats each)
-and four state vectors; per IMU sample the INS's navigation (9 floats). Up to
-``memory_budget_mb`` (default 256 MB; a 700 s run at 20 Hz epochs with 15 states takes 77 MB)
-they are numpy arrays in RAM; beyond it the same arrays are ``np.memmap`` files in a temporary
-directory (removed with the observer), so a long run's peak memory is the budget, not the
-run; the results are identical (``tests/test_aided_ins.py`` runs with a 0.01 MB budget).
+Memory: per epoch the record holds ``Phi``, ``Q``, ``P-``, ``P+``, ``C``, ``P^s`` (``n^2``
+floats each), five state vectors and the nominal (17 floats), and after the first
+:meth:`~SmootherRecord.error_samples` the noise factors (``n^2``); per IMU sample the INS's
+navigation (9 floats). Up to ``memory_budget_mb`` (default 256 MB; a 700 s run at 20 Hz epochs
+takes 160 MB with 15 states, 107 MB with 12) they are numpy arrays in RAM; beyond it the
+same arrays are ``np.memmap`` files in a temporary directory (removed with the observer), so a
+long run's peak memory is the budget plus one block's temporaries (the smoother's gains and
+the smoothed output are formed in blocks too), not the run; the results are bit for bit the
+same (``tests/test_aided_ins.py`` runs with a 0.01 MB budget).
+
+Consistency (``tests/test_aided_ins.py``): 8 seeds of the navigation grade on the trolley's
+150 s stop-and-go record, initial attitude errors drawn from P0: the smoothed position errors
+normalised by the smoothed sigmas have mean squares 1.21 (N), 0.82 (E), 0.69 (D), none
+beyond 3 sigma. The ideal IMU: smoothed position within 8e-4 mm of the truth over 150 s.
+
+Cost: on a 33 s run at 200 Hz (661 epochs, ZUPT at the stops) the filter takes 0.05-0.15 s
+and the smoother 0.02-0.08 s on the shared 2-core machine (7-22 and 3-12 us per IMU sample),
+the numba strapdown 0.006 s.
+
+After :meth:`AidedInsSmoother.run`: ``epoch_times``, ``P_filter``, ``P_smoothed`` (``(N, n, n)``,
+``state_names``), :meth:`~SmootherRecord.error_samples`, :meth:`~SmootherRecord.joint_covariance`,
+:meth:`AidedInsSmoother.nominal` (the linearisation trajectory, for
+:func:`covariance_analysis`), ``zupt_epochs``, ``filter_seconds``, ``smoother_seconds``,
+``strapdown_seconds``; :meth:`~AidedInsSmoother.finish` gives the times and the update counts.
 
 Settings (all optional; SSD ``rf:Setting`` or keyword arguments):
 
@@ -208,13 +234,18 @@ class _Store:
         self._dir = tempfile.TemporaryDirectory(prefix="aided_ins_") if self.spilled else None
         self.arrays: dict[str, np.ndarray] = {}
         for name, shape in shapes.items():
-            if self.spilled and math.prod(shape) > 0:
-                self.arrays[name] = np.lib.format.open_memmap(f"{self._dir.name}/{name}.npy", mode="w+",
-                                                              dtype=np.float64, shape=shape)
-            else:
-                self.arrays[name] = np.zeros(shape)
+            self.new(name, shape)
 
     def __getitem__(self, name: str) -> np.ndarray:
+        return self.arrays[name]
+
+    def new(self, name: str, shape: tuple[int, ...]) -> np.ndarray:
+        """Another array, in RAM or on disk as the others."""
+        if self.spilled and math.prod(shape) > 0:
+            self.arrays[name] = np.lib.format.open_memmap(f"{self._dir.name}/{name}.npy", mode="w+",
+                                                          dtype=np.float64, shape=shape)
+        else:
+            self.arrays[name] = np.zeros(shape)
         return self.arrays[name]
 
 
@@ -274,7 +305,7 @@ class SmootherRecord:
         if self._noise_factor is None:
             st = self._store
             N, n = st["Pp"].shape[:2]
-            L = np.empty((N, n, n))
+            L = st.new("L", (N, n, n))
             eye = np.eye(n)
             for a in range(0, N, 512):
                 b = min(a + 512, N)
@@ -748,14 +779,23 @@ class CovarianceAnalysis(SmootherRecord):
 def covariance_analysis(times, f_n, C_bn, latitude, velocity, zupt, position=None, height=0.0,
                         **settings: Any) -> CovarianceAnalysis:
     r"""The filter's and the smoother's covariance recursions on a given nominal trajectory,
-    without data (Jiang et al. (2017), §5): epoch ``times`` ``(N,)`` (s), per epoch the
-    specific force ``f_n`` ``(N, 3)`` (NED, m/s2; the value over the interval that ends at the
-    epoch), attitude ``C_bn`` ``(N, 3, 3)``, ``latitude`` (rad, scalar or ``(N,)``),
-    ``velocity`` ``(N, 3)`` (NED, m/s), ``zupt`` ``(N,)`` bool (zero-velocity update at the epoch),
-    ``position`` ``(N,)`` bool or None (landmark position update), ``height`` (m). ``settings``:
-    those of :class:`AidedInsSmoother` that concern the covariances (the grade, the P0 sigmas,
-    ``error_model``, ``zupt_sigma``, ``landmark_sigma``, ``memory_budget_mb``). Returns a
-    :class:`CovarianceAnalysis`."""
+    without data (Jiang et al. (2017), §5): the same error model, ``Phi``/``Q`` sampling,
+    Joseph updates and RTS covariance pass as :class:`AidedInsSmoother`.
+
+    ``times`` ``(N,)`` (s): the epochs; per epoch ``k`` the nominal over the interval that ends
+    at ``t_k`` (row 0 unused but for the shape): ``f_n`` ``(N, 3)`` specific force (NED, m/s2),
+    ``C_bn`` ``(N, 3, 3)`` attitude, ``latitude`` (rad), ``velocity`` ``(N, 3)`` (NED, m/s),
+    ``height`` (m) (each may be one value for all epochs); ``zupt`` ``(N,)`` bool: a
+    zero-velocity update at the epoch; ``position`` ``(N,)`` bool or None: a landmark position
+    update. ``settings``: those of :class:`AidedInsSmoother` that concern the covariances (the
+    grade, the P0 sigmas, ``error_model``, ``zupt_sigma``, ``landmark_sigma``,
+    ``memory_budget_mb``). ``AidedInsSmoother.nominal()`` and ``.zupt_epochs`` after a run
+    reproduce its covariances to rounding. Returns a :class:`CovarianceAnalysis`
+    (``epoch_times``, ``P_filter``, ``P_smoothed``, ``error_samples``, ``joint_covariance``).
+
+    The paper's straight track (§5): ``f_n = (0, 0, -g)`` while cruising, ``C_bn`` the constant
+    heading N45E, ``velocity`` 1 m/s along it, ZUPT (and optionally position) updates at both
+    ends of the 30 m."""
     s = check_settings("covariance_analysis", settings)
     times = np.asarray(times, dtype=float)
     N = times.shape[0]
