@@ -66,8 +66,10 @@ Measurements (the observer's ``measurements``; NaN or masked: absent):
 
 * ``stopped`` (0/1): zero-velocity update ``z = v~^n``, ``H = [0 I 0]``, ``R = zupt_sigma^2 I`` at
   the epochs whose sample is stopped: every such epoch (``zupt_interval = 0``), the first of a
-  stop and then every ``zupt_interval`` s, or one per stop at its middle epoch
-  (``zupt_interval = inf``, the paper's "one update per stop"). ``zupt_source="detector"`` takes
+  stop and then every ``zupt_interval`` s, or one per stop (``zupt_interval = inf``, the
+  paper's): at the epoch the trolley has come to rest, and for a rest the record starts with,
+  at its last epoch, when the motion starts (Jiang et al. (2017), §6: "updates at the beginning
+  and the end of the trajectory"). ``zupt_source="detector"`` takes
   the stops from ``estimators.zupt_detector.detect_stationary`` on the increments instead and
   reports its misses and false alarms against the flag.
 * non-holonomic constraint (``nhc``): ``z = (v~^b_y, v~^b_z)``, the rows y, z of
@@ -353,6 +355,8 @@ class SmootherRecord:
         indices (ascending): ``Cov(e_k, e_j) = C_k ... C_{j-1} P^s_j`` for ``k < j``.
         Shape ``(m n, m n)``; for tests and small analyses."""
         ks = [int(k) for k in epochs]
+        if any(b <= a for a, b in zip(ks, ks[1:])) or (ks and not 0 <= ks[0] <= ks[-1] < len(self.epoch_times)):
+            raise ValueError(f"joint_covariance: epochs must be increasing indices in 0..{len(self.epoch_times) - 1}")
         n = len(self.state_names)
         st = self._store
         M = np.zeros((len(ks) * n, len(ks) * n))
@@ -500,8 +504,9 @@ class AidedInsSmoother(OfflineObserver, SmootherRecord):
             end = k
             while end + 1 < idx.size and at[end + 1]:
                 end += 1
-            if math.isinf(interval):
-                use[(k + end) // 2] = True
+            if math.isinf(interval):  # the epoch next to the motion (module docstring)
+                before, after = k > 0, end < idx.size - 1
+                use[k if before else end if after else (k + end) // 2] = True
             else:
                 last = -math.inf
                 for j in range(k, end + 1):

@@ -218,10 +218,17 @@ def test_memory_budget_spills_to_disk_with_the_same_result(record):
 
 
 def test_zupt_interval_and_counts(record):
-    """One ZUPT per stop (interval inf: the paper's) on the 150 s record: the rest, two stops;
-    every 1 s: 11 + 6 + 6 (the first epoch of a stop, then each second)."""
+    """One ZUPT per stop (interval inf: the paper's) on the 150 s record: the rest (at its end),
+    two stops (on arrival); every 1 s: 11 + 6 + 6 (the first epoch of a stop, then each
+    second)."""
     obs, _ = run(record, zupt_interval="inf")
     assert obs.finish()["zupt_updates"] == 3
+    idx = np.round((obs.epoch_times - obs.epoch_times[0]) / DT).astype(int)
+    stopped = record["trolley.stopped"].to_numpy()[idx] > 0.5
+    used = np.flatnonzero(obs.zupt_epochs)
+    assert used[0] == np.flatnonzero(~stopped)[0] - 1  # the rest's last epoch: when the motion starts
+    arrivals = np.flatnonzero(stopped[1:] & ~stopped[:-1]) + 1
+    assert np.array_equal(used[1:], arrivals)  # the stops' first epochs
     obs, _ = run(record, zupt_interval=1.0)
     assert obs.finish()["zupt_updates"] == 11 + 6 + 6
 
