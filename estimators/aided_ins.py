@@ -60,7 +60,9 @@ Smoother's joint errors (:meth:`SmootherRecord.error_samples`). The RTS smoothin
 independent ``w_k``: sampling it backwards gives draws with the exact joint covariance
 ``Cov(e_k, e_j) = C_k ... C_{j-1} P^s_j`` (``k < j``). ``P+_k - C_k P-_{k+1} C_k^T`` is formed
 as ``(I - C_k Phi_k) P+_k (I - C_k Phi_k)^T + C_k Q_k C_k^T`` (the same matrix, a sum of PSD
-terms) and factored by its eigen-decomposition.
+terms). Only the epochs asked for are drawn, the chain's steps between them composed (their
+noise covariances summed through the ``C_k``), so the random numbers scale with the points
+wanted, not the epochs: 500 draws at 47 chord points of a 33 s run take 0.035 s.
 
 Measurements (the observer's ``measurements``; NaN or masked: absent):
 
@@ -93,7 +95,7 @@ Measurements (the observer's ``measurements``; NaN or masked: absent):
 
 Memory: per epoch the record holds ``Phi``, ``Q``, ``P-``, ``P+``, ``C``, ``P^s`` (``n^2``
 floats each), five state vectors and the nominal (17 floats), and after the first
-:meth:`~SmootherRecord.error_samples` the noise factors (``n^2``); per IMU sample the INS's
+:meth:`~SmootherRecord.error_samples` the backward chain's noise covariances (``n^2``); per IMU sample the INS's
 navigation (9 floats). Up to ``memory_budget_mb`` (default 256 MB; a 700 s run at 20 Hz epochs
 takes 160 MB with 15 states, 107 MB with 12) they are numpy arrays in RAM; beyond it the
 same arrays are ``np.memmap`` files in a temporary directory (removed with the observer), so a
@@ -278,7 +280,7 @@ class SmootherRecord:
     def _init_record(self, store: _Store, names: tuple[str, ...]) -> None:
         self._store = store
         self.state_names = names
-        self._noise_factor: np.ndarray | None = None
+        self._noise_cov: np.ndarray | None = None
 
     @property
     def P_filter(self) -> np.ndarray:
@@ -301,53 +303,68 @@ class SmootherRecord:
         right = self.epoch_times[np.minimum(j, len(self.epoch_times) - 1)]
         return np.where(np.abs(t - left) <= np.abs(right - t), j - 1, j).clip(0, len(self.epoch_times) - 1)
 
-    def _factors(self) -> np.ndarray:
-        """Per epoch ``L_k`` with ``L_k L_k^T = P+_k - C_k P-_{k+1} C_k^T`` (the last epoch:
-        ``P+_N``), from the PSD form in the module docstring, by eigen-decomposition."""
-        if self._noise_factor is None:
+    def _noise_covariances(self) -> np.ndarray:
+        """Per epoch ``Sigma_k = P+_k - C_k P-_{k+1} C_k^T`` in its PSD form (module docstring);
+        the last epoch: ``P+_N``. Formed once, in blocks."""
+        if self._noise_cov is None:
             st = self._store
             N, n = st["Pp"].shape[:2]
-            L = st.new("L", (N, n, n))
+            Sig = st.new("Sig", (N, n, n))
             eye = np.eye(n)
-            for a in range(0, N, 512):
-                b = min(a + 512, N)
-                S = st["Pp"][a:b].copy()
-                if b - a and a < N - 1:
-                    m = min(b, N - 1) - a
-                    C, F, Q = st["C"][a:a + m], st["Phi"][a:a + m], st["Q"][a:a + m]
-                    I_CF = eye - C @ F
-                    S[:m] = I_CF @ st["Pp"][a:a + m] @ I_CF.transpose(0, 2, 1) + C @ Q @ C.transpose(0, 2, 1)
-                S = 0.5 * (S + S.transpose(0, 2, 1))
-                w, V = np.linalg.eigh(S)
-                L[a:b] = V * np.sqrt(np.clip(w, 0.0, None))[:, None, :]
-            self._noise_factor = L
-        return self._noise_factor
+            for a in range(0, N - 1, 512):
+                b = min(a + 512, N - 1)
+                C, F, Q = (np.asarray(st[k][a:b]) for k in ("C", "Phi", "Q"))
+                I_CF = eye - C @ F
+                S = I_CF @ np.asarray(st["Pp"][a:b]) @ I_CF.transpose(0, 2, 1) + C @ Q @ C.transpose(0, 2, 1)
+                Sig[a:b] = 0.5 * (S + S.transpose(0, 2, 1))
+            Sig[N - 1] = st["Pp"][N - 1]
+            self._noise_cov = Sig
+        return self._noise_cov
+
+    @staticmethod
+    def _factor(S: np.ndarray) -> np.ndarray:
+        """``F`` with ``F F^T = S`` for a PSD ``S`` (eigen-decomposition, negative rounding
+        clipped)."""
+        w, V = np.linalg.eigh(0.5 * (S + S.T))
+        return V * np.sqrt(np.clip(w, 0.0, None))
 
     def error_samples(self, times, n_samples: int, seed: int | None = None, states=DR) -> np.ndarray:
         """``(n_samples, len(times), 3)``: draws of the smoothing error of the position (NED,
         m; ``states`` another slice of the error state) at the epochs nearest to ``times``,
-        from the smoother's joint Gaussian (backward sampling, module docstring)."""
-        if not (isinstance(n_samples, (int, np.integer)) and n_samples >= 1):
+        from the smoother's joint Gaussian (backward sampling, module docstring).
+
+        Only the wanted epochs are drawn: from the latest one ``k_b`` (``e ~ N(0, P^s_{k_b})``)
+        down, each next wanted ``k_a`` given the last is ``e_a = G e_b + w``, ``G = C_a ...
+        C_{b-1}``, ``w ~ N(0, S_a)`` with ``S_k = C_k S_{k+1} C_k^T + Sigma_k``, ``S_b = 0``
+        (the chain's steps composed: a sum of PSD terms, no difference of covariances)."""
+        if isinstance(n_samples, bool) or not (isinstance(n_samples, (int, np.integer)) and n_samples >= 1):
             raise ValueError(f"error_samples: n_samples must be a positive integer, not {n_samples!r}")
         want = self.nearest_epochs(times)
-        if want.size == 0:
-            return np.empty((n_samples, 0, len(range(*states.indices(len(self.state_names))))))
-        L = self._factors()
-        st = self._store
-        rng = np.random.default_rng(seed)
-        N, n = L.shape[:2]
-        k_min = int(want.min())
+        n = len(self.state_names)
         width = len(range(*states.indices(n)))
         out = np.empty((n_samples, want.size, width))
-        slots: dict[int, list[int]] = {}
+        if want.size == 0:
+            return out
+        st = self._store
+        Sig = self._noise_covariances()
+        rng = np.random.default_rng(seed)
+        order = sorted(set(want.tolist()), reverse=True)
+        top = order[0]
+        e = rng.standard_normal((n_samples, n)) @ self._factor(np.asarray(st["Ps"][top])).T
+        drawn = {top: e}
+        eye = np.eye(n)
+        prev = top
+        for k_a in order[1:]:
+            G, S = eye, np.zeros((n, n))
+            for k in range(prev - 1, k_a - 1, -1):
+                Ck = st["C"][k]
+                S = Ck @ S @ Ck.T + Sig[k]
+                G = Ck @ G
+            e = e @ G.T + rng.standard_normal((n_samples, n)) @ self._factor(S).T
+            drawn[k_a] = e
+            prev = k_a
         for i, k in enumerate(want.tolist()):
-            slots.setdefault(k, []).append(i)
-        e = rng.standard_normal((n_samples, n)) @ L[N - 1].T
-        for k in range(N - 1, k_min - 1, -1):
-            if k < N - 1:
-                e = e @ st["C"][k].T + rng.standard_normal((n_samples, n)) @ L[k].T
-            for i in slots.get(k, ()):
-                out[:, i] = e[:, states]
+            out[:, i] = drawn[k][:, states]
         return out
 
     def joint_covariance(self, epochs) -> np.ndarray:
