@@ -77,8 +77,10 @@ Measurements (the observer's ``measurements``; NaN or masked: absent):
 * non-holonomic constraint (``nhc``): ``z = (v~^b_y, v~^b_z)``, the rows y, z of
   ``ErrorModel.body_velocity_rows``, ``R = nhc_sigma^2 I``, at the epochs without a ZUPT. On
   the ``Trolley`` FMU the body point rides the rail and x is the rail tangent, so the
-  constraint is exact unless its ``wobble`` is set; ``nhc_sigma`` (default 1 mm/s) covers a
-  wobble of that size.
+  constraint is exact unless its ``wobble`` is set (the default ``nhc_sigma``, 1 mm/s, is for
+  that case). A wobble of amplitude ``a`` and wavelength ``l`` at speed ``v`` (the wheel-rail
+  play) moves the body sideways at up to ``2 pi a v / l``: ``nhc_sigma`` should be its rms,
+  ``sqrt(2) pi a v / l`` (2 mm at 0.5 m and 1 m/s: 18 mm/s), or the constraint is overconfident.
 * odometer (``odometer``, m, cumulative): speed form. ``z = x_b^T (r_k - r_{k-1}) / T -
   (s_k - s_{k-1}) / T``, the INS's mean body-x speed over the epoch (its own position
   increment, ``x_b`` at mid-epoch) minus the odometer's, with the body-x row of
