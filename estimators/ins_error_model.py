@@ -122,7 +122,16 @@ class ImuGrade:
     """The IMU's error densities in the ``ImuErrors`` parameter names and datasheet units
     (defaults: the navigation grade of Jiang et al. (2017), §3): gyro ARW (deg/sqrt(h)), bias
     instability (deg/h), its Gauss-Markov correlation time (s, ``inf``: a random constant);
-    accelerometer noise density (ug/sqrt(Hz)), bias instability (ug), correlation time (s)."""
+    accelerometer noise density (ug/sqrt(Hz)), bias instability (ug), correlation time (s); the
+    turn-on biases' sigmas (deg/h, ug: a random constant per run, the paper's "piecewise
+    constant" biases).
+
+    A bias state is the sum of the turn-on bias and the Gauss-Markov in-run bias. With no turn-on
+    bias it is the Gauss-Markov process exactly; with one, the sum of a constant and a GM process is
+    not one GM process, so the state becomes a random walk of the GM's intensity ``2 sigma_b^2 /
+    T_c`` from ``P0 = sigma_on^2 + sigma_b^2``: the GM's own short-time law, exact for the constant
+    and for runs much shorter than ``T_c`` (1 h in the grades; a survey between two ZUPTs lasts
+    seconds to minutes)."""
 
     gyro_arw_deg_sqrt_h: float = 0.005
     gyro_bias_instability_deg_h: float = 0.01
@@ -130,6 +139,8 @@ class ImuGrade:
     accel_noise_ug_sqrt_hz: float = 10.0
     accel_bias_instability_ug: float = 50.0
     accel_bias_correlation_time: float = 3600.0
+    gyro_turn_on_bias_sigma_deg_h: float = 0.0
+    accel_turn_on_bias_sigma_ug: float = 0.0
 
     def __post_init__(self) -> None:
         for k, v in self.__dict__.items():
@@ -160,6 +171,16 @@ class ImuGrade:
         """Gauss-Markov sigma_b of the accelerometer bias (m/s2)."""
         return GM_SIGMA_PER_B * self.accel_bias_instability_ug * ACCEL_SI
 
+    @property
+    def gyro_turn_on_sigma(self) -> float:
+        """Sigma of the constant gyro bias (rad/s)."""
+        return self.gyro_turn_on_bias_sigma_deg_h * GYRO_BIAS_SI
+
+    @property
+    def accel_turn_on_sigma(self) -> float:
+        """Sigma of the constant accelerometer bias (m/s2)."""
+        return self.accel_turn_on_bias_sigma_ug * ACCEL_SI
+
 
 class ErrorModel:
     """The error model of the module docstring for ``kind`` ``"paper12"`` or ``"full15"`` and
@@ -172,18 +193,17 @@ class ErrorModel:
         self.names = MODELS[kind]
         self.n = n = len(self.names)
         g = self.grade
-        # bias states: (index, sigma_b, T_c)
+        # bias states: (index, sigma_b, T_c, sigma_on) (ImuGrade: turn-on + Gauss-Markov)
+        gyro = (g.gyro_bias_sigma, g.gyro_bias_correlation_time, g.gyro_turn_on_sigma)
+        accel = (g.accel_bias_sigma, g.accel_bias_correlation_time, g.accel_turn_on_sigma)
         if kind == "paper12":
-            self.biases = [(9, g.gyro_bias_sigma, g.gyro_bias_correlation_time),
-                           (10, g.gyro_bias_sigma, g.gyro_bias_correlation_time),
-                           (11, g.accel_bias_sigma, g.accel_bias_correlation_time)]
+            self.biases = [(9, *gyro), (10, *gyro), (11, *accel)]
         else:
-            self.biases = ([(9 + i, g.gyro_bias_sigma, g.gyro_bias_correlation_time) for i in range(3)]
-                           + [(12 + i, g.accel_bias_sigma, g.accel_bias_correlation_time) for i in range(3)])
+            self.biases = [(9 + i, *gyro) for i in range(3)] + [(12 + i, *accel) for i in range(3)]
         Qc = np.zeros((n, n))
         Qc[PHI, PHI] = g.gyro_noise**2 * np.eye(3)  # C diag(q) C^T = q I
         Qc[DV, DV] = g.accel_noise**2 * np.eye(3)
-        for i, s, tc in self.biases:
+        for i, s, tc, _ in self.biases:
             Qc[i, i] = 2.0 * s * s / tc if math.isfinite(tc) else 0.0
         self.Qc = Qc
 
@@ -215,8 +235,8 @@ class ErrorModel:
             C = np.asarray(C_bn, dtype=float)
             A[:, PHI, 9:12] = -C
             A[:, DV, 12:15] = C
-        for i, _, tc in self.biases:
-            A[:, i, i] = -1.0 / tc if math.isfinite(tc) else 0.0
+        for i, _, tc, on in self.biases:
+            A[:, i, i] = -1.0 / tc if math.isfinite(tc) and on == 0.0 else 0.0  # ImuGrade: with a turn-on bias a random walk
         return A
 
     def discretize(self, A: np.ndarray, T) -> tuple[np.ndarray, np.ndarray]:
@@ -245,12 +265,12 @@ class ErrorModel:
     def initial_covariance(self, tilt_sigma: float, heading_sigma: float, velocity_sigma: float,
                            position_sigma: float) -> np.ndarray:
         """``P0 = diag(tilt^2, tilt^2, heading^2, velocity^2 x 3, position^2 x 3, sigma_b^2 ...)``
-        (rad, m/s, m; the biases at their stationary Gauss-Markov variance)."""
+        (rad, m/s, m; the biases at their turn-on plus stationary Gauss-Markov variance)."""
         d = np.zeros(self.n)
         d[0:2], d[2] = tilt_sigma**2, heading_sigma**2
         d[DV], d[DR] = velocity_sigma**2, position_sigma**2
-        for i, s, _ in self.biases:
-            d[i] = s * s
+        for i, s, _, on in self.biases:
+            d[i] = s * s + on * on
         return np.diag(d)
 
     # -- measurement rows -----------------------------------------------------------------------

@@ -234,3 +234,28 @@ def test_bad_grade_and_model_are_one_line():
         ImuGrade(gyro_arw_deg_sqrt_h=-1.0)
     with pytest.raises(ValueError, match="accel_bias_correlation_time must be > 0"):
         ImuGrade(accel_bias_correlation_time=0.0)
+
+
+def test_turn_on_biases_are_random_constants_in_the_model():
+    """The paper's "piecewise constant" biases: turn-on sigmas only -> P0 holds them, no process
+    noise, no decay; both kinds -> P0 is the sum and the state a random walk of the GM intensity."""
+    from estimators.ins_error_model import ErrorModel, ImuGrade
+
+    const = ImuGrade(gyro_bias_instability_deg_h=0.0, accel_bias_instability_ug=0.0,
+                     gyro_turn_on_bias_sigma_deg_h=0.01, accel_turn_on_bias_sigma_ug=50.0)
+    for kind, gyro, accel in (("paper12", (9, 10), (11,)), ("full15", (9, 10, 11), (12, 13, 14))):
+        m = ErrorModel(kind, const)
+        P0 = m.initial_covariance(1e-4, 1e-3, 1e-4, 0.1)
+        A = m.system_matrix(0.5, 0.0, (1.0, 0.0, 0.0), (0.0, 0.0, -9.8), np.eye(3))
+        for i in gyro:
+            assert P0[i, i] == pytest.approx((0.01 * np.pi / 180 / 3600) ** 2, rel=1e-12)
+        for i in accel:
+            assert P0[i, i] == pytest.approx((50e-6 * 9.80665) ** 2, rel=1e-12)
+        for i in (*gyro, *accel):
+            assert A[i, i] == 0.0 and m.Qc[i, i] == 0.0
+    both = ErrorModel("paper12", ImuGrade(accel_turn_on_bias_sigma_ug=30.0))
+    s_b = both.grade.accel_bias_sigma
+    assert both.initial_covariance(1e-4, 1e-3, 1e-4, 0.1)[11, 11] == pytest.approx(s_b**2 + (30e-6 * 9.80665) ** 2)
+    A = both.system_matrix(0.5, 0.0, (1.0, 0.0, 0.0), (0.0, 0.0, -9.8), np.eye(3))
+    assert A[11, 11] == 0.0 and both.Qc[11, 11] == pytest.approx(2 * s_b**2 / 3600.0)
+    assert A[9, 9] == pytest.approx(-1 / 3600.0)  # the gyro has no turn-on bias: exact GM
