@@ -29,10 +29,11 @@ To first order ``Delta_s = J_s [e_s, e_{s+o}, e_a, e_b]``; for a straight chord 
 this is eqs. 21-22, ``Delta_y = e_E(s) - e_E(s + o) + (o / l) (e_E(b) - e_E(a))``.
 :func:`chord_error_jacobian` gives ``J`` (central differences of the exact map; the map is
 smooth, so they are exact to ~1e-9 relative), the map a covariance goes through. It leaves
-out terms of second order in the errors: the chord turns by ``~|e_b - e_a| / l`` and a point
-moves along it by its along-track error, so the neglected part is about
-``|e_s - e_{s+o}| |e_b - e_a| / l``: 1e-8 m for millimetre relative errors, ~1e-5 m for
-the 10 cm errors of an unaided INS (measured in ``tests/test_chord_accuracy.py``).
+out terms of second order in the errors (the chord turns by ``~|e_b - e_a| / l`` while
+points move along it by their along-track errors): for smooth errors whose chord errors
+are ~1 mm it is off by ~1e-4 of them (0.1 um), growing in proportion to the errors (1.4 %
+at 9 cm; measured in ``tests/test_chord_accuracy.py``). A constant error and a turn of the
+whole survey about the vertical give no chord error, exactly.
 
 Prediction of the paper's statistic
 -----------------------------------
@@ -43,10 +44,11 @@ the position errors at the grid samples (``AidedInsSmoother.error_samples``, or
 ``sqrt(mean_S max_s Delta^2)`` for alignment and level, the pointwise RMS of ``Delta`` along
 the track (for the plots), and the relative standard error of the prediction (delta method:
 ``se(RMS) / RMS = std(M^2) / (2 sqrt(S) mean(M^2))``, ``M`` the per-sample maximum). For the
-paper's 30 m run ``std(M^2) / mean(M^2)`` is about 1.3 (alignment) and 1.4 (level) (measured
-in the tests: the maximum of a 51-point chord error is nearly a 2-D Gaussian's norm), so
-``S`` = 1000 (:data:`DEFAULT_SAMPLES`) gives 2 % (the Monte Carlo of 500 runs it is compared
-with has 3 %); the chord part costs ~2 ms for a 30 m run and ~20 ms for 600 m.
+paper's 30 m chord ``std(M^2) / mean(M^2)`` is 1.16 (alignment) and 1.40 (level, where the
+chord error is nearly one Gaussian times a shape: ``M^2 ~ chi^2_1``, ``sqrt 2``) (measured
+in the tests), so ``S`` = 1000 (:data:`DEFAULT_SAMPLES`) gives 1.8 % and 2.2 % (a Monte Carlo
+of 500 runs has 2.6 % and 3.1 %); the chord part then costs ~8 ms for a 30 m run (2 cores
+shared), ~10 ms per further chord.
 
 Closed forms (eqs. 29-31)
 -------------------------
