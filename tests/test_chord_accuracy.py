@@ -9,8 +9,9 @@ import pytest
 import scipy.linalg as sla
 from mpmath import mp
 
-from estimators.chord_accuracy import (DEFAULT_SAMPLES, alignment_variance, chord_error_jacobian,
-                                       chord_error_statistics, chord_errors, chord_grid, closed_form_sigma,
+from estimators.chord_accuracy import (DEFAULT_SAMPLES, NOMINAL, alignment_variance, chord_error_jacobian,
+                                       chord_error_statistics, chord_errors, chord_grid, chord_sigma_from_covariance,
+                                       closed_form_sigma, nominal_chord_accuracy, nominal_run, sensitivity_curves,
                                        level_variance, linear_chord_errors, predict_chord_sigma)
 
 D2R = math.pi / 180.0
@@ -332,7 +333,7 @@ def test_sampled_prediction_matches_the_exact_max_statistic_and_the_closed_forms
     assert exact_z == pytest.approx(math.sqrt(vz.max()), rel=1e-6)  # rank 1: the max pointwise sigma
     # sampled: error trajectories from the smoothed Gaussian, through the exact chord map
     rng = np.random.default_rng(2024)
-    S = 4 * DEFAULT_SAMPLES
+    S = 4000
     e = np.einsum("nij,sj->sni", Gmap, rng.standard_normal((S, 12)) @ L.T)
     p = predict_chord_sigma(g, r, e)
     assert p.n_samples == S
@@ -345,3 +346,72 @@ def test_sampled_prediction_matches_the_exact_max_statistic_and_the_closed_forms
     assert np.allclose(p.pointwise_level_mm, 1e3 * np.sqrt(vz), rtol=5 / math.sqrt(2 * S))
     assert p.metrics() == {"predicted_sigma_alignment_mm": p.sigma_alignment_mm,
                            "predicted_sigma_level_mm": p.sigma_level_mm}
+
+
+def test_pointwise_sigma_from_a_joint_covariance_is_the_closed_form():
+    g, r, P0s, Gmap = simplified_run(sigma_r=1e-3)
+    cov = np.einsum("aij,jk,blk->aibl", Gmap, P0s, Gmap).reshape(3 * g.distance.size, 3 * g.distance.size)
+    sy, sz = chord_sigma_from_covariance(g, r, cov)
+    vy = alignment_variance(g.s, 1 / 6, 30.0, G, P_PHI, P_EPS, SIGMA_V, 1e-3)
+    vz = level_variance(g.s, 1 / 6, 30.0, P_NABLA, SIGMA_V)
+    assert np.allclose(sy, np.sqrt(vy), rtol=1e-6) and np.allclose(sz, np.sqrt(vz), rtol=1e-6)
+
+
+# ---- the covariance analysis of the aided INS (estimators.aided_ins) ----
+
+@pytest.mark.parametrize("position", [False, True])
+def test_covariance_analysis_of_the_simplified_case_gives_the_closed_forms(position):
+    """The full error model reduces to eq. 20 at the equator on a straight track due north
+    without sensor noise, with constant biases and ~no heading error (Earth rate and Coriolis
+    then leave the alignment and level channels but for < 1e-3): one update at the end
+    (velocity, and position when ``position``) gives eqs. 29-31 point by point."""
+    from models import earth
+    run = nominal_run(azimuth=0.0, latitude=0.0, position_updates=position)
+    run.zupt[0] = run.position[0] = False
+    grade = {"gyro_arw_deg_sqrt_h": 0.0, "accel_noise_ug_sqrt_hz": 0.0, "gyro_bias_correlation_time": math.inf,
+             "accel_bias_correlation_time": math.inf}
+    res = nominal_chord_accuracy(run, **{**NOMINAL, **grade, "heading_sigma": 1e-6, "position_sigma": SIGMA_R,
+                                         "landmark_sigma": SIGMA_R})
+    from models.imu_errors import GM_SIGMA_PER_B
+    p_eps = (GM_SIGMA_PER_B * 0.01 * D2R / 3600.0) ** 2
+    p_nabla = (GM_SIGMA_PER_B * 50e-6 * 9.80665) ** 2
+    g0 = earth.gravity(0.0, 0.0)
+    sy, sz = closed_form_sigma(run.grid.s, 1 / 6, 30.0, g0, P_PHI, p_eps, p_nabla, SIGMA_V,
+                               SIGMA_R if position else math.inf)
+    off_y = np.abs(res["pointwise_alignment_mm"] / (1e3 * sy) - 1).max()
+    off_z = np.abs(res["pointwise_level_mm"] - 1e3 * sz).max() / (1e3 * sz.max())
+    print(f"covariance analysis vs eqs. 29-31: alignment {off_y:.2g} relative, level {off_z:.2g} of its max")
+    # level: absolute (its sigma is 0 at t_s = (1 - k) T / 2); the free-air term 2 g / a dr_D,
+    # which eq. 20 leaves out, is 6e-4 of nabla_D for 0.1 m position errors
+    assert off_y < 1e-5 and off_z < 1e-3
+    assert res["alignment_mm"] == pytest.approx(1e3 * sy.max(), rel=1e-3)
+
+
+def test_sensitivity_curves_follow_the_papers_remarks():
+    axes = {"zupt_sigma": (np.array([0.03, 0.1, 0.3]), "mm/s", 1e-3),
+            "tilt_sigma": (np.array([0.002, 0.02]), "deg", D2R),
+            "heading_sigma": (np.array([0.02, 0.2]), "deg", D2R),
+            "gyro_bias_instability_deg_h": (np.array([0.003, 0.03]), "deg/h", 1.0),
+            "accel_bias_instability_ug": (np.array([10.0, 200.0]), "ug", 1.0)}
+    c = sensitivity_curves(axes)
+    nom = c["nominal"]
+    # the paper's nominal (0.1 mm/s, 0.005 deg/sqrt(h), 10 ug/sqrt(Hz), 0.01 deg/h, 50 ug,
+    # 0.006 / 0.06 deg): the largest pointwise sigma on the 30 m chord
+    assert nom["alignment_mm"] == pytest.approx(0.979, abs=0.01)
+    assert nom["level_mm"] == pytest.approx(0.913, abs=0.01)
+    z = c["zupt_sigma"]
+    assert np.all(np.diff(z["alignment_mm"]) > 0) and np.all(np.diff(z["level_mm"]) > 0)  # Fig. 8
+    assert z["alignment_mm"][1] == pytest.approx(nom["alignment_mm"], rel=1e-9)
+    # position updates at the ends change neither (Fig. 8; eq. 30; eq. 29 barely)
+    assert np.allclose(z["alignment_mm_position"], z["alignment_mm"], rtol=3e-3)
+    assert np.allclose(z["level_mm_position"], z["level_mm"], rtol=3e-3)
+    # the level does not see the attitude errors nor the gyro biases (Figs. 10, 11) ...
+    for name in ("tilt_sigma", "heading_sigma", "gyro_bias_instability_deg_h"):
+        lv = c[name]["level_mm"]
+        assert abs(lv[1] / lv[0] - 1) < 1e-3, name
+    # ... while the alignment grows with the heading error and the gyro bias
+    assert c["heading_sigma"]["alignment_mm"][1] > 1.05 * c["heading_sigma"]["alignment_mm"][0]
+    assert c["gyro_bias_instability_deg_h"]["alignment_mm"][1] > 1.01 * c["gyro_bias_instability_deg_h"]["alignment_mm"][0]
+    # the accelerometer bias acts on the level only (Fig. 11; eq. 29 has no nabla)
+    ab = c["accel_bias_instability_ug"]
+    assert abs(ab["alignment_mm"][1] / ab["alignment_mm"][0] - 1) < 1e-3 and ab["level_mm"][1] > 2 * ab["level_mm"][0]
