@@ -41,7 +41,8 @@ The paper's figure of merit (Fig. 12) is, per run, the maximum ``|Delta|`` over 
 chord points, and over runs its RMS. From ``S`` samples of the smoother's joint Gaussian of
 the position errors at the grid samples (``AidedInsSmoother.error_samples``, or
 ``covariance_analysis(...).error_samples``) :func:`predict_chord_sigma` returns
-``sqrt(mean_S max_s Delta^2)`` for alignment and level, the pointwise RMS of ``Delta`` along
+``sqrt(mean_S max_s Delta^2)`` (max over all surveyed points) for alignment and level, the
+pointwise RMS of ``Delta`` along
 the track (for the plots), and the relative standard error of the prediction (delta method:
 ``se(RMS) / RMS = std(M^2) / (2 sqrt(S) mean(M^2))``, ``M`` the per-sample maximum).
 Measured ``std(M^2) / mean(M^2)``: 0.78 (alignment) and 0.75 (level) on the paper's nominal
@@ -96,10 +97,23 @@ with the posterior of ``(phi_N, eps_N)`` after the update (``w = 1 / sigma_r^2``
 12-state system (``expm``, a Kalman update, the RTS smoother's covariances and
 cross-covariances between ``0, t_s, t_s + k T, T``) in the tests. **Errata / reading
 notes**: the paper writes these for its chord only, ``k = 1/6``, having put ``T = 6 k T``
-(its ``5 k T`` is ``(1 - k) T``, its ``35 k^2 T^2`` is ``(1 - k^2) T^2 = 35 k^2 T^2``); here
-``k`` is free and at ``k = 1/6`` the expressions equal the printed eqs. 29 and 31 term by
-term. Eq. 30's denominator is ``4 (sigma_v^2 + 18 k^2 p_nabla T^2)`` (the PDF's text reads
-like ``4 sigma_v^2 + 18 k^2 p_nabla T^2``, which is wrong by up to a factor 4).
+(its ``5 k T`` stands for ``(1 - k) T``, its ``35 k^2 T^2`` for ``(1 - k^2) T^2``, and so on):
+they are wrong for any other ``k``. Here ``k`` is free; at ``k = 1/6`` the values equal the
+printed eqs. 29 and 31 to 1e-12 (no typo found in them). Eq. 30's denominator is
+``4 (sigma_v^2 + 18 k^2 p_nabla T^2)``: the extracted text reads like
+``4 sigma_v^2 + 18 k^2 p_nabla T^2``, which is wrong by up to a factor 4.
+
+Use in a study
+--------------
+With the record's true ``distance``, ``north, east, down`` and the smoothed position
+errors ``err`` (local NED, m; e.g. ``estimators.ins_error_model.ned_difference`` of the
+smoothed and the true latitude, longitude, height) and the smoother ``obs``::
+
+    grid = chord_grid(distance)
+    r = truth_ned[grid.sample]
+    metrics = chord_error_statistics(*chord_errors(grid, r, err[grid.sample]))
+    pred = predict_chord_sigma(grid, r, obs.error_samples(time[grid.sample], DEFAULT_SAMPLES, seed))
+    metrics.update(pred.metrics())      # predicted_sigma_alignment_mm, predicted_sigma_level_mm
 """
 
 from __future__ import annotations
@@ -150,7 +164,8 @@ def chord_grid(distance, ds: float = 0.5, chord_length: float = 30.0, offset: fl
     Grid distances are the multiples of ``ds`` in ``[distance[0], distance[-1]]`` (a grid
     point the run does not reach is left out); each takes the nearest record sample, the
     first of a stop (so a stop does not duplicate points). A chord ``[j l, (j + 1) l]`` is
-    surveyed when both its ends are on the grid."""
+    surveyed when both its ends are on the grid (a run shorter than a chord has none: its
+    statistics are NaN)."""
     dist = np.asarray(distance, dtype=float)
     if dist.ndim != 1 or dist.size < 2 or not np.all(np.isfinite(dist)):
         raise ValueError("distance must be a finite 1-D array of at least two samples")
@@ -256,8 +271,10 @@ def linear_chord_errors(grid: ChordGrid, jacobian, position_errors) -> tuple[np.
 def chord_error_statistics(alignment, level) -> dict:
     """The paper's per-run statistic and the rms (mm): max |error| over all surveyed chord
     points and the rms over them, under the study's metric names. Leading axes (runs or
-    samples) are kept: the values are then arrays."""
+    samples) are kept: the values are then arrays. A run that surveys no whole chord gets NaN."""
     a, v = np.abs(np.asarray(alignment)), np.abs(np.asarray(level))
+    if a.shape[-1] == 0:
+        a = v = np.full(a.shape[:-1] + (1,), np.nan)
     out = {"chord_alignment_max_error_mm": MM * a.max(axis=-1),
            "chord_level_max_error_mm": MM * v.max(axis=-1),
            "chord_alignment_rms_error_mm": MM * np.sqrt(np.mean(a * a, axis=-1)),
@@ -293,6 +310,8 @@ class ChordPrediction:
 
 
 def _rms_and_se(m: np.ndarray) -> tuple[float, float]:
+    if m.size == 0:
+        return math.nan, math.nan
     m2 = m * m
     mean = float(m2.mean())
     se = float(m2.std(ddof=1)) / (2.0 * math.sqrt(m2.size) * mean) if m2.size > 1 and mean > 0 else math.inf
@@ -308,8 +327,9 @@ def predict_chord_sigma(grid: ChordGrid, true_positions, error_samples) -> Chord
     if e.ndim != 3:
         raise ValueError(f"error samples must be (S, n_grid, 3), got {e.shape}")
     a, v = chord_errors(grid, true_positions, e)
-    sa, ra = _rms_and_se(np.abs(a).max(axis=-1))
-    sv, rv = _rms_and_se(np.abs(v).max(axis=-1))
+    none = np.zeros(0)  # no whole chord surveyed: nothing to predict (NaN)
+    sa, ra = _rms_and_se(np.abs(a).max(axis=-1) if grid.n_points else none)
+    sv, rv = _rms_and_se(np.abs(v).max(axis=-1) if grid.n_points else none)
     return ChordPrediction(MM * sa, MM * sv, ra, rv, MM * np.sqrt(np.mean(a * a, axis=0)),
                            MM * np.sqrt(np.mean(v * v, axis=0)), grid.s.copy(), e.shape[0])
 
@@ -336,7 +356,8 @@ def alignment_variance(t_s, k: float, T: float, g: float, p_phi: float, p_eps: f
     D = (576 * sv2 + 288 * T2 * g2 * p_phi + 72 * T2 ** 2 * g2 * p_eps
          + w * (144 * T2 * sv2 ** 2 + 72 * T2 ** 2 * g2 * p_phi * sv2 + 20 * T2 ** 3 * g2 * p_eps * sv2
                 + T2 ** 4 * g2 * g2 * p_phi * p_eps))
-    P_ff = 4 * p_phi * (144 * sv2 + 18 * T2 ** 2 * g2 * p_eps + w * (36 * T2 * sv2 ** 2 + 5 * T2 ** 3 * g2 * p_eps * sv2)) / D
+    P_ff = 4 * p_phi * (144 * sv2 + 18 * T2 ** 2 * g2 * p_eps
+                        + w * (36 * T2 * sv2 ** 2 + 5 * T2 ** 3 * g2 * p_eps * sv2)) / D
     P_fe = 36 * T2 * T * g2 * p_phi * p_eps * (4 + w * T2 * sv2) / D
     P_ee = 72 * p_eps * (4 + w * T2 * sv2) * (T2 * g2 * p_phi + 2 * sv2) / D
     q2, q3 = _q2_q3(t_s, k, T)
@@ -420,7 +441,8 @@ class NominalRun:
 
 
 def nominal_run(length: float = 30.0, speed: float = 1.0, azimuth: float = 45.0 * DEG,
-                latitude: float = 30.5 * DEG, filter_period: float = 0.05, position_updates: bool = False) -> NominalRun:
+                latitude: float = 30.5 * DEG, filter_period: float = 0.05,
+                position_updates: bool = False) -> NominalRun:
     """The paper's simulated survey (§ 6.1): straight, level, N45E, 30 m at 1 m/s, velocity
     (ZUPT) updates at the first and last epochs, landmark position updates there too when
     ``position_updates``."""
