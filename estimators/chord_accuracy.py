@@ -48,10 +48,11 @@ the track (for the plots), and the relative standard error of the prediction (de
 Measured ``std(M^2) / mean(M^2)``: 0.78 (alignment) and 0.75 (level) on the paper's nominal
 run with its sensor noise (:func:`nominal_chord_accuracy`), 1.16 and 1.40 in the noise-free
 simplified case of eqs. 29-31 (there the level error is one Gaussian times a shape, ``M^2 ~
-chi^2_1``: ``sqrt 2``). So ``S`` samples give ~``0.39 / sqrt(S)``: 3.2 % at ``S = 150``
-(:data:`DEFAULT_SAMPLES`), 1.2 % at 1000; a 500-run Monte Carlo's own RMS has ~1.7 %. Cost
-on the 30 m run (600 KF epochs, this 2-core machine): the smoother's backward sampling
-~0.17 ms per sample (25 ms for 150), the chord errors ~0.006 ms per sample.
+chi^2_1``: ``sqrt 2``). So ``S`` samples give ~``0.39 / sqrt(S)``: 1.7 % at ``S = 500``
+(:data:`DEFAULT_SAMPLES`), 1.2 % at 1000, 3.2 % at 150; a 500-run Monte Carlo's own RMS has
+~1.7 %. Cost on the 30 m run (61 grid epochs of 600; this 2-core machine, loaded): the
+smoother's sampling of the grid epochs ~23-28 ms for 500 samples, the chord errors ~2 ms
+(both about linear in ``S``).
 :func:`chord_sigma_from_covariance` gives the pointwise sigma exactly from a joint
 covariance instead (``SmootherRecord.joint_covariance`` at the grid epochs).
 
@@ -125,8 +126,8 @@ import numpy as np
 
 from models.track_geometry import vector_distance
 
-#: samples of the joint Gaussian per prediction: ~3 % relative standard error, ~25 ms (module doc)
-DEFAULT_SAMPLES = 150
+#: samples of the joint Gaussian per prediction: ~1.7 % relative standard error, ~25 ms (module doc)
+DEFAULT_SAMPLES = 500
 MM = 1e3
 
 

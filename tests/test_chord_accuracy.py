@@ -426,3 +426,25 @@ def test_sensitivity_curves_follow_the_papers_remarks():
     # the accelerometer bias acts on the level only (Fig. 11; eq. 29 has no nabla)
     ab = c["accel_bias_instability_ug"]
     assert abs(ab["alignment_mm"][1] / ab["alignment_mm"][0] - 1) < 1e-3 and ab["level_mm"][1] > 2 * ab["level_mm"][0]
+
+
+def test_prediction_from_the_smoothers_samples_agrees_with_its_joint_covariance():
+    """On the paper's nominal run: the pointwise sigma from ``error_samples`` through the exact
+    chord map equals the one from ``joint_covariance`` through the linear map, and the
+    predicted RMS of the max lies above the largest pointwise sigma (a max of 51 points)."""
+    from estimators.aided_ins import covariance_analysis
+    run = nominal_run()
+    ca = covariance_analysis(run.times, run.f_n, run.C_bn, run.latitude, run.velocity, run.zupt, **NOMINAL)
+    m = run.grid_epochs.size
+    cov = ca.joint_covariance(run.grid_epochs).reshape(m, 12, m, 12)[:, 6:9, :, 6:9].reshape(3 * m, 3 * m)
+    sy, sz = chord_sigma_from_covariance(run.grid, run.true_positions, cov)
+    S = 4000
+    p = predict_chord_sigma(run.grid, run.true_positions, ca.error_samples(run.times[run.grid_epochs], S, 5))
+    assert np.allclose(p.pointwise_alignment_mm, 1e3 * sy, rtol=5 / math.sqrt(2 * S))
+    assert np.allclose(p.pointwise_level_mm, 1e3 * sz, rtol=5 / math.sqrt(2 * S))
+    assert 1.3 * 1e3 * sy.max() < p.sigma_alignment_mm < 1.7 * 1e3 * sy.max()
+    assert 1.3 * 1e3 * sz.max() < p.sigma_level_mm < 1.7 * 1e3 * sz.max()
+    # the stated precision: std(M^2) / mean(M^2) ~ 0.78 here, so 0.39 / sqrt(S)
+    assert 0.3 < p.relative_se_alignment * math.sqrt(S) < 0.5 and 0.3 < p.relative_se_level * math.sqrt(S) < 0.5
+    print(f"nominal: max pointwise sigma {1e3 * sy.max():.3f} / {1e3 * sz.max():.3f} mm, predicted RMS of the "
+          f"max {p.sigma_alignment_mm:.3f} / {p.sigma_level_mm:.3f} mm (alignment / level)")
