@@ -12,7 +12,7 @@ from mpmath import mp
 from estimators.chord_accuracy import (DEFAULT_SAMPLES, NOMINAL, alignment_variance, chord_error_jacobian,
                                        chord_error_statistics, chord_errors, chord_grid, chord_sigma_from_covariance,
                                        closed_form_sigma, nominal_chord_accuracy, nominal_run, sensitivity_curves,
-                                       level_variance, linear_chord_errors, predict_chord_sigma)
+                                       level_variance, linear_chord_errors, predict_chord_sigma, survey_chords)
 
 D2R = math.pi / 180.0
 G = 9.8
@@ -448,3 +448,26 @@ def test_prediction_from_the_smoothers_samples_agrees_with_its_joint_covariance(
     assert 0.3 < p.relative_se_alignment * math.sqrt(S) < 0.5 and 0.3 < p.relative_se_level * math.sqrt(S) < 0.5
     print(f"nominal: max pointwise sigma {1e3 * sy.max():.3f} / {1e3 * sz.max():.3f} mm, predicted RMS of the "
           f"max {p.sigma_alignment_mm:.3f} / {p.sigma_level_mm:.3f} mm (alignment / level)")
+
+
+def test_survey_chords_of_a_record_gives_the_study_metrics():
+    """A 200 Hz record of the nominal run with a stop at each end, errors drawn from the
+    covariance analysis: the metrics are those of the grid samples, the prediction attached."""
+    from estimators.aided_ins import covariance_analysis
+    run = nominal_run()
+    ca = covariance_analysis(run.times, run.f_n, run.C_bn, run.latitude, run.velocity, run.zupt, **NOMINAL)
+    t = np.arange(0.0, 30.0 + 1e-9, 0.005)
+    dist = np.clip(t - 1.0, 0.0, 28.0) * 30.0 / 28.0  # 1 s at rest, 28 s moving, 1 s at rest
+    truth = straight(dist, math.radians(45.0))
+    err = ca.error_samples(t, 1, seed=3)[0]
+    sv = survey_chords(dist, truth, err, times=t, smoother=ca, n_samples=300, seed=4)
+    assert sorted(sv.metrics) == sorted(["chord_alignment_max_error_mm", "chord_level_max_error_mm",
+                                         "chord_alignment_rms_error_mm", "chord_level_rms_error_mm",
+                                         "predicted_sigma_alignment_mm", "predicted_sigma_level_mm"])
+    g = chord_grid(dist)
+    a, v = chord_errors(g, truth[g.sample], err[g.sample])
+    assert sv.metrics["chord_level_max_error_mm"] == 1e3 * np.abs(v).max()
+    assert np.array_equal(sv.alignment, a) and sv.prediction.n_samples == 300
+    assert g.sample[0] == 0 and dist[g.sample[-1]] == 30.0 and np.all(dist[g.sample[1:]] > 0)
+    assert 0.5 < sv.metrics["predicted_sigma_alignment_mm"] < 3.0
+    assert survey_chords(dist, truth, err).prediction is None
