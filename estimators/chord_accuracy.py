@@ -123,6 +123,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from estimators.ins_error_model import DR
+from models import earth
 from models.track_geometry import vector_distance
 
 #: samples of the joint Gaussian per prediction: ~1.7 % relative standard error, ~25 ms (module doc)
@@ -479,8 +481,6 @@ def nominal_run(length: float = 30.0, speed: float = 1.0, azimuth: float = 45.0 
     """The paper's simulated survey (§ 6.1): straight, level, N45E, 30 m at 1 m/s, velocity
     (ZUPT) updates at the first and last epochs, landmark position updates there too when
     ``position_updates``."""
-    from models import earth
-
     n = int(round(length / speed / filter_period))
     times = np.arange(n + 1) * filter_period
     dist = speed * times
@@ -502,15 +502,12 @@ def nominal_chord_accuracy(run: NominalRun, n_samples: int = 0, seed: int = 1, *
     the surveyed points (exact, from the smoother's joint covariance), ``pointwise_*_mm``, and
     with ``n_samples`` > 0 the predicted RMS over runs of the max ``|error|``
     (``max_rms_alignment_mm``, ``max_rms_level_mm``; :func:`predict_chord_sigma`)."""
-    from estimators.aided_ins import covariance_analysis
+    from estimators.aided_ins import covariance_analysis  # the INS and its filter: only here
 
     ca = covariance_analysis(run.times, run.f_n, run.C_bn, run.latitude, run.velocity, run.zupt,
                              position=run.position, **settings)
-    dr = slice(6, 9)
-    n = len(ca.state_names)
-    full = ca.joint_covariance(run.grid_epochs)
-    m = run.grid_epochs.size
-    cov = full.reshape(m, n, m, n)[:, dr, :, dr].reshape(3 * m, 3 * m)
+    n, m = len(ca.state_names), run.grid_epochs.size
+    cov = ca.joint_covariance(run.grid_epochs).reshape(m, n, m, n)[:, DR, :, DR].reshape(3 * m, 3 * m)
     sy, sz = chord_sigma_from_covariance(run.grid, run.true_positions, cov)
     out = {"alignment_mm": MM * float(sy.max()), "level_mm": MM * float(sz.max()),
            "pointwise_alignment_mm": MM * sy, "pointwise_level_mm": MM * sz}
@@ -541,7 +538,7 @@ def sensitivity_curves(axes=None, n_samples: int = 0, seed: int = 1, **nominal) 
     base = {**NOMINAL, **nominal}
     runs = {False: nominal_run(), True: nominal_run(position_updates=True)}
     keys = ("alignment_mm", "level_mm") + (("max_rms_alignment_mm", "max_rms_level_mm") if n_samples else ())
-    out = {"nominal": {k: v for k, v in nominal_chord_accuracy(runs[False], n_samples, seed, **base).items()}}
+    out = {"nominal": nominal_chord_accuracy(runs[False], n_samples, seed, **base)}
     for name, (values, unit, factor) in axes.items():
         curve = {"x": np.asarray(values, dtype=float), "unit": unit}
         for pos in (False, True) if name == "zupt_sigma" else (False,):
