@@ -35,6 +35,7 @@ bench: build
 	$(BIN)/python benchmarks/process_model.py
 	$(BIN)/python benchmarks/strapdown.py
 	$(BIN)/python benchmarks/trolley_survey.py
+	$(BIN)/python benchmarks/trolley_filter.py
 
 clean:
 	rm -rf build $(OUT) .pytest_cache
