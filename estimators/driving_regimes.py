@@ -284,12 +284,12 @@ def features(time, speed, acceleration, effort, regimes, mass_effective: float |
     prev = _previous(r)
     prev[:1] = -1  # fix 0 has no interval
     continuous = (r == TRACTION) & (prev == TRACTION) & (a > 0)
-
     sel = continuous & (kmh >= EFFORT_WINDOW_KMH[0]) & (kmh <= EFFORT_WINDOW_KMH[1])
     max_effort = theil_sen_at(vm[sel], f[sel], EFFORT_WINDOW_KMH[0] * KMH)
     effort_samples = {"time": t[sel], "speed": vm[sel], "effort": f[sel]}
 
-    sel = continuous & (kmh >= POWER_WINDOW_KMH[0]) & (kmh <= POWER_WINDOW_KMH[1])
+    # the power's fixes also pull after them: a block's last traction fix may end in a coast
+    sel = continuous & (np.r_[r[1:], TRACTION] == TRACTION) & (kmh >= POWER_WINDOW_KMH[0]) & (kmh <= POWER_WINDOW_KMH[1])
     power = f[sel] * vm[sel]
     max_power = float(power.mean()) if power.size else math.nan
     # the initial traction phase (Fig. 9): until the first non-traction fix at or above 50 km/h
@@ -308,6 +308,12 @@ def features(time, speed, acceleration, effort, regimes, mass_effective: float |
 
     cruise = (r == CRUISING) & (v >= 0.5 * v.max())
     cruise_speed = float(np.median(v[cruise])) if cruise.any() else math.nan
+    high = np.flatnonzero((v >= 0.5 * v.max()) & (r != TRACTION))
+    pulls = np.flatnonzero(r == TRACTION)
+    if not cruise.any() and high.size and pulls.size and pulls[-1] > high[0]:
+        # no cruising fix but pulls after the first let-up: traction/coast cycles, their median speed
+        cycle = np.arange(high[0], pulls[-1] + 1)
+        cruise_speed = float(np.median(v[cycle[v[cycle] >= 0.5 * v.max()]]))
     coast, brake = final_durations(t, r, v, standstill_speed)
 
     out = {"max_effort_specific": max_effort, "max_power_specific": max_power, "brake_rates": rates,
