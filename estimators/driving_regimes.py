@@ -155,6 +155,25 @@ def recognise(speed, acceleration, effort, band_effort: float = BAND_EFFORT,
     return np.where(np.maximum(v, _previous(v)) <= standstill_speed, STANDSTILL, regime).astype(int)
 
 
+#: the regime recognisers by name: what an estimator names as its ``regime_recogniser`` (a class
+#: attribute, or the SSD setting of that name) and the study scores it with
+RECOGNISERS = ("paper", "hmm")
+
+
+def recogniser(name: str):
+    """The recogniser ``name`` as a function ``(time, speed, acceleration, effort) -> codes``:
+    ``"paper"`` the §3.2 rules of Cunillera et al. (2022) (:func:`recognise`; each fix
+    alone), ``"hmm"`` the hidden Markov model over the run
+    (:func:`estimators.regime_decoding.recognise_hmm`). A ValueError names the known ones."""
+    if name == "paper":
+        return lambda time, speed, acceleration, effort: recognise(speed, acceleration, effort)
+    if name == "hmm":
+        from .regime_decoding import recognise_hmm
+
+        return recognise_hmm
+    raise ValueError(f"unknown regime recogniser {name!r}: choose one of {', '.join(RECOGNISERS)}")
+
+
 def true_regimes(time, speed, effort, band_acceleration: float = BAND_ACCELERATION,
                  standstill_speed: float = STANDSTILL_SPEED) -> np.ndarray:
     """The regime of each step ``[t_k, t_(k+1)]`` of a simulated run by the §3.2 definitions on
@@ -380,16 +399,17 @@ def feature_errors(feats: Mapping, truth: Mapping) -> dict:
 
 
 def score(fix_time, speed, acceleration, effort, time, true_speed, true_effort, style: Mapping,
-          train: Mapping) -> tuple[dict, dict]:
+          train: Mapping, recogniser_name: str = "paper") -> tuple[dict, dict]:
     """One estimator on one simulated run, as the study records it: ``(metrics, features)``.
 
     ``fix_time``, ``speed``, ``acceleration``, ``effort``: the estimator's outputs at the GNSS
     fixes (rows where the receiver's ``valid`` is set; effort and acceleration of the interval
     ending at each fix). ``time``, ``true_speed``, ``true_effort``: the driver's grid as the
     Jacobi master records it (``train.v``, ``train.effort_specific``). ``style``, ``train``:
-    as :func:`feature_truth`. ``metrics`` holds ``regime_accuracy`` and the
-    :func:`feature_errors`; ``features`` is :func:`features`' dict."""
-    rec = recognise(speed, acceleration, effort)
+    as :func:`feature_truth`; ``recogniser_name`` the estimator's recogniser (:func:`recogniser`).
+    ``metrics`` holds ``regime_accuracy`` and the :func:`feature_errors`; ``features`` is
+    :func:`features`' dict."""
+    rec = recogniser(recogniser_name)(fix_time, speed, acceleration, effort)
     truth = feature_truth(style, train)
     feats = features(fix_time, speed, acceleration, effort, rec, truth["mass_effective"])
     accuracy = regime_accuracy(rec, true_regimes(time, true_speed, true_effort), fix_time, time)

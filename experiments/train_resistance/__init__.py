@@ -103,9 +103,35 @@ def mass_effective(roles: dict) -> float:
     return float(roles["gamma"]) * (float(roles["tare_mass"]) + float(roles["load_mass"]))
 
 
+def regime_recognisers(system) -> dict[str, str]:
+    """Per observer the regime recogniser it is scored with (:data:`estimators.driving_regimes.RECOGNISERS`):
+    its SSD setting ``regime_recogniser``, else its class attribute of that name, else the
+    paper's rules (``"paper"``): each estimator is scored as its author means it to be read."""
+    import importlib
+
+    from estimators.driving_regimes import RECOGNISERS
+
+    where = str(system.source or system.name)
+    out = {}
+    for o in system.observers:
+        name = o.settings.get("regime_recogniser")
+        if name is None:
+            module, _, cls = o.cls.rpartition(".")
+            try:
+                name = getattr(getattr(importlib.import_module(module), cls), "regime_recogniser", "paper")
+            except (ImportError, AttributeError, ValueError):
+                name = "paper"  # the observer bank names a class it cannot import
+        if name not in RECOGNISERS:
+            raise UserError(f"{where}: Observer {o.name!r}: regime_recogniser {name!r} is not one of "
+                            f"{', '.join(RECOGNISERS)}")
+        out[o.name] = str(name)
+    return out
+
+
 def regime_scores(run: RunData, name: str, fixes: np.ndarray) -> tuple[dict, dict]:
     """One estimator's driving regimes and features (Cunillera et al. (2022) §3.2-3.3, by
-    :func:`estimators.driving_regimes.score`) at the GNSS fix rows ``fixes``: the issue's
+    :func:`estimators.driving_regimes.score` with the estimator's recogniser,
+    :func:`regime_recognisers`) at the GNSS fix rows ``fixes``: the issue's
     ``regime_accuracy``, ``max_power_rel_error``, ``max_effort_rel_error``,
     ``cruise_speed_error_kmh``, ``brake_rate_error`` (five, per ATB-EG step, None where the
     run has no braking fix there; also as ``brake_rate_error_step`` by step for the study's
@@ -121,7 +147,7 @@ def regime_scores(run: RunData, name: str, fixes: np.ndarray) -> tuple[dict, dic
     train["rotating_mass_factor"] = float(roles["gamma"])
     m, feats = score(t, np.asarray(est[f"{name}.v"])[fixes], np.asarray(est[f"{name}.acceleration"])[fixes],
                      np.asarray(est[f"{name}.effort"])[fixes], sig["time"], sig[roles["v"]], sig[roles["effort"]],
-                     style, train)
+                     style, train, run.roles.get("regime_recognisers", {}).get(name, "paper"))
     m = {k: _finite(x) if isinstance(x, float) else x for k, x in m.items()}
     rec = np.asarray(feats["regimes"])
     dt = np.r_[0.0, np.diff(t)]  # a fix stands for the interval before it
@@ -194,6 +220,7 @@ class TrainResistance(Study):
         """The roles, and the check that every observer of the GNSS samples at its period (a
         ``--set gnss.sample_period`` alone would leave the observers at the old one)."""
         roles = super().bind(system)
+        roles["regime_recognisers"] = regime_recognisers(system)
         period = float(roles["gnss_period"])
         for o in system.observers:
             own = o.period if o.period is not None else system.step_size
