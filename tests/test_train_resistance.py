@@ -106,6 +106,13 @@ def test_standard_run_end_to_end(standard):
     assert [x for x in e["brake_rate_error"] if x is not None] == pytest.approx(
         [x for x in ref["brake_rate_error"] if x is not None], rel=1e-12)
     assert e["features"]["cruise_speed_kmh"] == pytest.approx(feats["cruise_speed"] * 3.6, rel=1e-12)
+    # each estimator is read by its own recogniser: `improved` by the HMM over the run
+    assert (e["regime_recogniser"], m["improved"]["regime_recogniser"]) == ("paper", "hmm")
+    ours, _ = score(sig["time"][every], est["improved.v"][every], est["improved.acceleration"][every],
+                    est["improved.effort"][every], sig["time"], sig["train.v"], sig["train.effort_specific"],
+                    style, train, "hmm")
+    assert m["improved"]["regime_accuracy"] == pytest.approx(ours["regime_accuracy"], rel=1e-12)
+    assert m["improved"]["regime_accuracy"] >= 0.95 > e["regime_accuracy"]
     # what the paper's UKF gives on this run (a wrong effort or acceleration breaks these)
     assert e["regime_accuracy"] > 0.75 and e["max_power_rel_error"] < 0.1 and e["cruise_speed_error_kmh"] < 3
     assert sum(e["regime_share"].values()) == pytest.approx(1.0)

@@ -22,6 +22,10 @@ an object under its name::
     r0_final, r1_final, r2_final      the final estimates (SI)
     seconds                           the estimator's wall time in the run
 
+and, for an estimator that outputs its acceleration and effort, the driving regimes and
+features (:func:`regime_scores`), read by the recogniser the estimator names
+(:func:`regime_recognisers`: ``improved`` the hidden Markov model over the run, the
+paper's UKFs the paper's rules), with its name as ``regime_recogniser``;
 and ``truth``: the run's true r0-r2 at the end, the driver's style (cruise target, brake
 rate per ATB-EG step, cycles), the run time, top speed, and from the driver's regime the
 shares of traction, cruising, coasting and braking in the run time and the final coast and
@@ -145,14 +149,15 @@ def regime_scores(run: RunData, name: str, fixes: np.ndarray) -> tuple[dict, dic
                                                   *(f"brake_rate_{j}" for j in range(1, 6)))}
     train = {k: float(roles[k]) for k in ("max_power", "max_traction_force", "tare_mass", "load_mass")}
     train["rotating_mass_factor"] = float(roles["gamma"])
+    recogniser = roles.get("regime_recognisers", {}).get(name, "paper")
     m, feats = score(t, np.asarray(est[f"{name}.v"])[fixes], np.asarray(est[f"{name}.acceleration"])[fixes],
                      np.asarray(est[f"{name}.effort"])[fixes], sig["time"], sig[roles["v"]], sig[roles["effort"]],
-                     style, train, run.roles.get("regime_recognisers", {}).get(name, "paper"))
+                     style, train, recogniser)
     m = {k: _finite(x) if isinstance(x, float) else x for k, x in m.items()}
     rec = np.asarray(feats["regimes"])
     dt = np.r_[0.0, np.diff(t)]  # a fix stands for the interval before it
     running = float(dt[rec != 0].sum()) or 1.0
-    return {**m, "brake_rate_error_step": {str(k + 1): e for k, e in enumerate(m["brake_rate_error"]) if e is not None},
+    return {**m, "regime_recogniser": recogniser, "brake_rate_error_step": {str(k + 1): e for k, e in enumerate(m["brake_rate_error"]) if e is not None},
             "regime_share": {REGIME_NAMES[c]: float(dt[rec == c].sum() / running) for c in (1, 2, 3, 4)},
             "features": {"max_power_w": _finite(feats["max_power"]), "max_effort_n": _finite(feats["max_effort"]),
                          "cruise_speed_kmh": _finite(feats["cruise_speed"] / KMH),
@@ -323,9 +328,10 @@ class TrainResistance(Study):
         scored = [n for n in names if "regime_accuracy" in metrics[n]]
         if scored:
             L += ["## Driving regimes and features (§3.2-3.3)", "",
-                  "| estimator | regime accuracy | max. power rel. error | max. effort rel. error | "
-                  "cruise speed error [km/h] | brake rate error per ATB-EG step [m/s2] |", "|---|---|---|---|---|---|"]
-            L += [f"| {n} | {_f(metrics[n]['regime_accuracy'], '.3f')} | {_f(metrics[n]['max_power_rel_error'], '.4f')} | "
+                  "| estimator | recogniser | regime accuracy | max. power rel. error | max. effort rel. error | "
+                  "cruise speed error [km/h] | brake rate error per ATB-EG step [m/s2] |", "|---|---|---|---|---|---|---|"]
+            L += [f"| {n} | {metrics[n].get('regime_recogniser', 'paper')} | {_f(metrics[n]['regime_accuracy'], '.3f')} | "
+                  f"{_f(metrics[n]['max_power_rel_error'], '.4f')} | "
                   f"{_f(metrics[n]['max_effort_rel_error'], '.4f')} | {_f(metrics[n]['cruise_speed_error_kmh'], '.2f')} | "
                   f"{', '.join(_f(e, '+.3f') for e in metrics[n]['brake_rate_error'])} |" for n in scored]
             L.append("")
