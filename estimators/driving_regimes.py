@@ -75,8 +75,9 @@ speeds it spans.
 * ``max_power_specific`` (W/kg): the mean of ``f v_mid`` over the continuously accelerating
   fixes with mid speed in 50-130 km/h whose next fix is traction too (mass-specific power
   f v: what the fixes give without a mass; the last fix of a pull may end in a coast: a
-  recogniser that gives a mixed interval to its larger share labels it traction). ``max_power`` (W) = ``mass_effective`` times it. Scored against the *applied*
-  maximum ``traction_fraction P_max / (gamma m)`` (:func:`feature_truth`): 20 twin runs,
+  recogniser that gives a mixed interval to its larger share labels it traction).
+  ``max_power`` (W) = ``mass_effective`` times it. Scored against the *applied* maximum
+  ``traction_fraction P_max / (gamma m)`` (:func:`feature_truth`): 20 twin runs,
   exact every 10 s within 0.8 % (median 0.03 %), GNSS with a finite-difference effort
   within 1 % (median 0.33 %).
 * ``brake_rates`` (m/s2, five, NaN where a step has none): the mean deceleration ``-a`` of the
@@ -320,7 +321,8 @@ def features(time, speed, acceleration, effort, regimes, mass_effective: float |
     effort_samples = {"time": t[sel], "speed": vm[sel], "effort": f[sel]}
 
     # the power's fixes also pull after them: a block's last traction fix may end in a coast
-    sel = continuous & (np.r_[r[1:], TRACTION] == TRACTION) & (kmh >= POWER_WINDOW_KMH[0]) & (kmh <= POWER_WINDOW_KMH[1])
+    pulls_on = np.r_[r[1:], TRACTION] == TRACTION
+    sel = continuous & pulls_on & (kmh >= POWER_WINDOW_KMH[0]) & (kmh <= POWER_WINDOW_KMH[1])
     power = f[sel] * vm[sel]
     max_power = float(power.mean()) if power.size else math.nan
     # the initial traction phase (Fig. 9): until the first non-traction fix at or above 50 km/h

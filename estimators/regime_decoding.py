@@ -26,9 +26,9 @@ Inputs are the samples of :mod:`estimators.driving_regimes` (``acceleration[j]``
        standstill  1 where max(v_(j-1), v_j) <= v_stop, and then the only regime
 
    each in [0, 1], 1 deep inside its region. An interval that ends at rest (``v_j <= v_stop
-   < v_(j-1)``) is a brake (step 4 gives it to standstill where the train stood most of it). ``f_b`` (``brake_effort``, 0.06 N/kg): a brake
-   is applied, not grazed (the Driver's brakes decelerate 0.3-0.7 m/s2), so a coast read at
-   -0.03 N/kg stays a coast.
+   < v_(j-1)``) is a brake (step 4 gives it to standstill where the train stood most of
+   it). ``f_b`` (``brake_effort``, 0.06 N/kg): a brake is applied, not grazed (the
+   Driver's brakes decelerate 0.3-0.7 m/s2), so a coast read at -0.03 N/kg stays a coast.
 2. Transitions: a regime of mean duration ``tau`` (``regime_duration``) is left within
    ``dt`` with odds ``dt / tau`` against staying: switching costs ``log(tau / dt_j)``
    (>= 0) in the log score, staying nothing. Every switch is allowed (cruise cycles go

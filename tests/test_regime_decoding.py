@@ -60,8 +60,8 @@ def hand_made_run():
     f = np.where(a == 0.0, 0.0, a + 0.05)
     f[(time >= 47) & (time < 100)] = 0.0  # the coast: no effort
     f[time >= 153] = -0.5  # held brake at rest (the truth says standstill)
-    truth_steps = np.select([np.abs(v) + np.abs(np.r_[v[1:], 0]) <= 0.1, f > 0, f == 0], [STANDSTILL, TRACTION, COASTING],
-                            BRAKING)
+    at_rest = np.abs(v) + np.abs(np.r_[v[1:], 0]) <= 0.1
+    truth_steps = np.select([at_rest, f > 0, f == 0], [STANDSTILL, TRACTION, COASTING], BRAKING)
     fix_t = np.arange(0.0, 200.0, 10.0)
     idx = fix_t.astype(int)
     err = 0.014 * (-1.0) ** np.arange(fix_t.size)

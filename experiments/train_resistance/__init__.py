@@ -157,7 +157,8 @@ def regime_scores(run: RunData, name: str, fixes: np.ndarray) -> tuple[dict, dic
     rec = np.asarray(feats["regimes"])
     dt = np.r_[0.0, np.diff(t)]  # a fix stands for the interval before it
     running = float(dt[rec != 0].sum()) or 1.0
-    return {**m, "regime_recogniser": recogniser, "brake_rate_error_step": {str(k + 1): e for k, e in enumerate(m["brake_rate_error"]) if e is not None},
+    return {**m, "regime_recogniser": recogniser,
+            "brake_rate_error_step": {str(k + 1): e for k, e in enumerate(m["brake_rate_error"]) if e is not None},
             "regime_share": {REGIME_NAMES[c]: float(dt[rec == c].sum() / running) for c in (1, 2, 3, 4)},
             "features": {"max_power_w": _finite(feats["max_power"]), "max_effort_n": _finite(feats["max_effort"]),
                          "cruise_speed_kmh": _finite(feats["cruise_speed"] / KMH),
