@@ -435,13 +435,17 @@ class ImprovedEstimator(Observer):
     (m/s; default 1 km/h / sqrt(12), the rounding error of a 1 km/h reading),
     ``sigma_position`` (m, 4), ``jerk_noise`` (m^2/s^5), ``effort_band`` (N/kg),
     ``recognition_window`` (s), ``min_coast`` (s), ``min_speed`` (m/s), ``test_sigmas``
-    (-), ``r_random_walk`` (1/sqrt(s)), ``line_file``, ``rotating_mass_factor``.
+    (-), ``r_random_walk`` (1/sqrt(s)), ``line_file``, ``rotating_mass_factor``;
+    ``regime_recogniser`` (how a study reads its regimes, ``"hmm"`` unless set: the class
+    attribute of that name, :func:`estimators.driving_regimes.recogniser`).
     """
 
     measurements: ClassVar[tuple[str, ...]] = PaperUKF.measurements
     outputs: ClassVar[tuple[str, ...]] = PaperUKF.outputs
     units: ClassVar[dict[str, str]] = PaperUKF.units
     event_driven: ClassVar[bool] = True
+    #: its outputs are read by the hidden Markov model over the run (estimators/regime_decoding.py)
+    regime_recogniser: ClassVar[str] = "hmm"
 
     DEFAULTS: ClassVar[dict[str, float]] = {
         "prior_rel_sigma": 0.1, "sigma_speed": float(ROUNDING_SIGMA_SPEED), "sigma_position": PAPER_SIGMA_S,
@@ -451,7 +455,7 @@ class ImprovedEstimator(Observer):
     def __init__(self, dt: float, **settings: Any) -> None:
         super().__init__(dt, **settings)
         unknown = sorted(set(settings) - {*self.DEFAULTS, "r0_init", "r1_init", "r2_init", "line_file",
-                                          "rotating_mass_factor"})
+                                          "rotating_mass_factor", "regime_recogniser"})
         if unknown:
             raise ValueError(f"unknown setting(s) {', '.join(unknown)}")
         self.line = LineTerm(settings.get("line_file") or None, _setting(settings, "rotating_mass_factor", GAMMA))

@@ -313,3 +313,28 @@ def test_score_is_the_pieces_together():
                          feature_truth(run.style, TRAIN))
     assert metrics == {"regime_accuracy": metrics["regime_accuracy"], **ref}
     assert feats["max_power"] == pytest.approx(feats["max_power_specific"] * GAMMA * (TARE_MASS + LOAD_MASS))
+
+
+def test_power_from_pulls_that_go_on_and_cruise_speed_of_cycles():
+    """The power's fixes are traction before and after (a pull's last fix may end in a coast:
+    half its effort here); a cruise span that is at most a tenth cruising is traction/coast
+    cycles, whose cruise speed is the span's median speed."""
+    kmh = np.array([0, 20, 60, 80, 100, 120, 125, 122, 119, 123, 126, 121, 117, 118, 90, 40, 0])
+    v = kmh * KMH
+    r = np.array([STANDSTILL] + [TRACTION] * 5 + [TRACTION, COASTING, COASTING, TRACTION, TRACTION, COASTING,
+                                                   COASTING, COASTING, BRAKING, BRAKING, BRAKING])
+    t = 10.0 * np.arange(v.size)
+    a = np.r_[0.0, np.diff(v) / 10.0]
+    f = np.where(r == TRACTION, 0.3, np.where(r == BRAKING, -0.5, 0.0))
+    f[6] = 0.15  # the pull's last fix before the first coast
+    feats = features(t, v, a, f, r)
+    vm = 0.5 * (v[1:] + v[:-1])
+    # fixes 3-5 (mid 70, 90, 110 km/h): traction before and after; not fix 2 (mid 40 km/h), fix 6 (a
+    # coast follows), fix 9 (a coast before) or fix 10 (a coast after)
+    assert feats["max_power_specific"] == pytest.approx(np.mean([0.3 * vm[k - 1] for k in (3, 4, 5)]), rel=1e-14)
+    assert feats["max_power_specific"] == pytest.approx(0.3 * 90 * KMH, rel=1e-14)
+    # no cruising fix: the span from the first let-up at speed (fix 7) to the last pull (fix 10)
+    assert feats["cruise_speed"] == pytest.approx(np.median(v[7:11]), rel=1e-14)
+    r2 = r.copy()
+    r2[8] = CRUISING  # one of four: more than a tenth, the cruising fixes decide
+    assert features(t, v, a, f, r2)["cruise_speed"] == pytest.approx(v[8], rel=1e-14)

@@ -106,6 +106,13 @@ def test_standard_run_end_to_end(standard):
     assert [x for x in e["brake_rate_error"] if x is not None] == pytest.approx(
         [x for x in ref["brake_rate_error"] if x is not None], rel=1e-12)
     assert e["features"]["cruise_speed_kmh"] == pytest.approx(feats["cruise_speed"] * 3.6, rel=1e-12)
+    # each estimator is read by its own recogniser: `improved` by the HMM over the run
+    assert (e["regime_recogniser"], m["improved"]["regime_recogniser"]) == ("paper", "hmm")
+    ours, _ = score(sig["time"][every], est["improved.v"][every], est["improved.acceleration"][every],
+                    est["improved.effort"][every], sig["time"], sig["train.v"], sig["train.effort_specific"],
+                    style, train, "hmm")
+    assert m["improved"]["regime_accuracy"] == pytest.approx(ours["regime_accuracy"], rel=1e-12)
+    assert m["improved"]["regime_accuracy"] >= 0.95 > e["regime_accuracy"]
     # what the paper's UKF gives on this run (a wrong effort or acceleration breaks these)
     assert e["regime_accuracy"] > 0.75 and e["max_power_rel_error"] < 0.1 and e["cruise_speed_error_kmh"] < 3
     assert sum(e["regime_share"].values()) == pytest.approx(1.0)
@@ -257,11 +264,12 @@ def test_the_67_run_study(tmp_path, fmu_dir):
     """`railfmu study train_resistance --variant standard --runs 67`: the paper's 67 runs in at
     most 60 s on two workers (measured 25 s), and issue 12's targets on the medians: `improved`
     resistance_rel_error <= 0.05 (measured 0.0043) and speed_rmse_kmh <= 1.0 (0.23);
-    max_power_rel_error <= 0.05 (ukf_paper 0.018, improved 0.019). regime_accuracy: the issue
-    asks >= 0.95; measured 0.934 (ukf_paper) and 0.930 (improved), against 0.947 for the
-    paper's rules on the exact signals sampled every 10 s (the mixed intervals of the cruise
-    cycles): asserted at what they reach. The paper's UKF as it comes out: resistance_rel_error
-    0.050, speed 0.28 km/h; `ukf_fmu` (the FMU as its process model) the same to 1e-4."""
+    max_power_rel_error <= 0.05 (ukf_paper 0.018, improved 0.015). regime_accuracy >= 0.95
+    for `improved`, read by its hidden Markov model over the run (estimators/regime_decoding.py):
+    measured 0.978; the paper's UKF read by the paper's rules as it comes out, 0.934 (the
+    rules on the exact signals sampled every 10 s: 0.947, the mixed intervals of the cruise
+    cycles). The paper's UKF: resistance_rel_error 0.050, speed 0.28 km/h; `ukf_fmu` (the FMU
+    as its process model) the same to 1e-4."""
     t0 = time.monotonic()
     res = railfmu("study", "train_resistance", "--variant", "standard", "--runs", "67", "--out", str(tmp_path))
     wall = time.monotonic() - t0
@@ -272,7 +280,7 @@ def test_the_67_run_study(tmp_path, fmu_dir):
     assert p50["improved.resistance_rel_error"] < p50["ukf_paper.resistance_rel_error"] / 5
     assert p50["ukf_paper.speed_rmse_kmh"] <= 1.0
     assert p50["ukf_paper.max_power_rel_error"] <= 0.05 and p50["improved.max_power_rel_error"] <= 0.05
-    assert p50["ukf_paper.regime_accuracy"] >= 0.92 and p50["improved.regime_accuracy"] >= 0.92
+    assert p50["ukf_paper.regime_accuracy"] >= 0.92 and p50["improved.regime_accuracy"] >= 0.95
     assert abs(p50["ukf_fmu.resistance_rel_error"] - p50["ukf_paper.resistance_rel_error"]) < 1e-4
     # the 60 s of the issue is a speed goal, measured by the command and reported, not asserted
     # here (a loaded machine is not a slow implementation)

@@ -22,6 +22,10 @@ an object under its name::
     r0_final, r1_final, r2_final      the final estimates (SI)
     seconds                           the estimator's wall time in the run
 
+and, for an estimator that outputs its acceleration and effort, the driving regimes and
+features (:func:`regime_scores`), read by the recogniser the estimator names
+(:func:`regime_recognisers`: ``improved`` the hidden Markov model over the run, the
+paper's UKFs the paper's rules), with its name as ``regime_recogniser``;
 and ``truth``: the run's true r0-r2 at the end, the driver's style (cruise target, brake
 rate per ATB-EG step, cycles), the run time, top speed, and from the driver's regime the
 shares of traction, cruising, coasting and braking in the run time and the final coast and
@@ -103,9 +107,35 @@ def mass_effective(roles: dict) -> float:
     return float(roles["gamma"]) * (float(roles["tare_mass"]) + float(roles["load_mass"]))
 
 
+def regime_recognisers(system) -> dict[str, str]:
+    """Per observer the regime recogniser it is scored with (:data:`estimators.driving_regimes.RECOGNISERS`):
+    its SSD setting ``regime_recogniser``, else its class attribute of that name, else the
+    paper's rules (``"paper"``): each estimator is scored as its author means it to be read."""
+    import importlib
+
+    from estimators.driving_regimes import RECOGNISERS
+
+    where = str(system.source or system.name)
+    out = {}
+    for o in system.observers:
+        name = o.settings.get("regime_recogniser")
+        if name is None:
+            module, _, cls = o.cls.rpartition(".")
+            try:
+                name = getattr(getattr(importlib.import_module(module), cls), "regime_recogniser", "paper")
+            except (ImportError, AttributeError, ValueError):
+                name = "paper"  # the observer bank names a class it cannot import
+        if name not in RECOGNISERS:
+            raise UserError(f"{where}: Observer {o.name!r}: regime_recogniser {name!r} is not one of "
+                            f"{', '.join(RECOGNISERS)}")
+        out[o.name] = str(name)
+    return out
+
+
 def regime_scores(run: RunData, name: str, fixes: np.ndarray) -> tuple[dict, dict]:
     """One estimator's driving regimes and features (Cunillera et al. (2022) §3.2-3.3, by
-    :func:`estimators.driving_regimes.score`) at the GNSS fix rows ``fixes``: the issue's
+    :func:`estimators.driving_regimes.score` with the estimator's recogniser,
+    :func:`regime_recognisers`) at the GNSS fix rows ``fixes``: the issue's
     ``regime_accuracy``, ``max_power_rel_error``, ``max_effort_rel_error``,
     ``cruise_speed_error_kmh``, ``brake_rate_error`` (five, per ATB-EG step, None where the
     run has no braking fix there; also as ``brake_rate_error_step`` by step for the study's
@@ -119,14 +149,16 @@ def regime_scores(run: RunData, name: str, fixes: np.ndarray) -> tuple[dict, dic
                                                   *(f"brake_rate_{j}" for j in range(1, 6)))}
     train = {k: float(roles[k]) for k in ("max_power", "max_traction_force", "tare_mass", "load_mass")}
     train["rotating_mass_factor"] = float(roles["gamma"])
+    recogniser = roles.get("regime_recognisers", {}).get(name, "paper")
     m, feats = score(t, np.asarray(est[f"{name}.v"])[fixes], np.asarray(est[f"{name}.acceleration"])[fixes],
                      np.asarray(est[f"{name}.effort"])[fixes], sig["time"], sig[roles["v"]], sig[roles["effort"]],
-                     style, train)
+                     style, train, recogniser)
     m = {k: _finite(x) if isinstance(x, float) else x for k, x in m.items()}
     rec = np.asarray(feats["regimes"])
     dt = np.r_[0.0, np.diff(t)]  # a fix stands for the interval before it
     running = float(dt[rec != 0].sum()) or 1.0
-    return {**m, "brake_rate_error_step": {str(k + 1): e for k, e in enumerate(m["brake_rate_error"]) if e is not None},
+    return {**m, "regime_recogniser": recogniser,
+            "brake_rate_error_step": {str(k + 1): e for k, e in enumerate(m["brake_rate_error"]) if e is not None},
             "regime_share": {REGIME_NAMES[c]: float(dt[rec == c].sum() / running) for c in (1, 2, 3, 4)},
             "features": {"max_power_w": _finite(feats["max_power"]), "max_effort_n": _finite(feats["max_effort"]),
                          "cruise_speed_kmh": _finite(feats["cruise_speed"] / KMH),
@@ -194,6 +226,7 @@ class TrainResistance(Study):
         """The roles, and the check that every observer of the GNSS samples at its period (a
         ``--set gnss.sample_period`` alone would leave the observers at the old one)."""
         roles = super().bind(system)
+        roles["regime_recognisers"] = regime_recognisers(system)
         period = float(roles["gnss_period"])
         for o in system.observers:
             own = o.period if o.period is not None else system.step_size
@@ -296,9 +329,10 @@ class TrainResistance(Study):
         scored = [n for n in names if "regime_accuracy" in metrics[n]]
         if scored:
             L += ["## Driving regimes and features (§3.2-3.3)", "",
-                  "| estimator | regime accuracy | max. power rel. error | max. effort rel. error | "
-                  "cruise speed error [km/h] | brake rate error per ATB-EG step [m/s2] |", "|---|---|---|---|---|---|"]
-            L += [f"| {n} | {_f(metrics[n]['regime_accuracy'], '.3f')} | {_f(metrics[n]['max_power_rel_error'], '.4f')} | "
+                  "| estimator | recogniser | regime accuracy | max. power rel. error | max. effort rel. error | "
+                  "cruise speed error [km/h] | brake rate error per ATB-EG step [m/s2] |", "|---|---|---|---|---|---|---|"]
+            L += [f"| {n} | {metrics[n].get('regime_recogniser', 'paper')} | {_f(metrics[n]['regime_accuracy'], '.3f')} | "
+                  f"{_f(metrics[n]['max_power_rel_error'], '.4f')} | "
                   f"{_f(metrics[n]['max_effort_rel_error'], '.4f')} | {_f(metrics[n]['cruise_speed_error_kmh'], '.2f')} | "
                   f"{', '.join(_f(e, '+.3f') for e in metrics[n]['brake_rate_error'])} |" for n in scored]
             L.append("")

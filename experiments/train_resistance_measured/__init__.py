@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from experiments.study_protocol import RunData, Study, measurement, parameter
-from experiments.train_resistance import KMH, _f, _finite, estimators_of, resistance
+from experiments.train_resistance import KMH, _f, _finite, estimators_of, regime_recognisers, resistance
 from fmus.errors import UserError
 
 REFERENCE = "ukf_paper"
@@ -35,16 +35,17 @@ ROLES = {"position": measurement(REFERENCE, "position"), "speed": measurement(RE
 PLOTS = {"measured.png": ("The replayed run", [[("position", "position [m]")], [("speed", "speed [km/h]")]])}
 
 
-def features_of(t: np.ndarray, est: dict, name: str) -> dict:
+def features_of(t: np.ndarray, est: dict, name: str, recogniser_name: str = "paper") -> dict:
     """The §3.3 features of one estimator's outputs at the fixes (Cunillera et al. (2022),
-    :func:`estimators.driving_regimes.features` on its recognised regimes); mass-specific (a
+    :func:`estimators.driving_regimes.features` on the regimes its recogniser ``recogniser_name``
+    reads, :func:`experiments.train_resistance.regime_recognisers`); mass-specific (a
     measured run carries no mass): ``max_power_w_per_kg``, ``max_effort_n_per_kg``, the
     cruise speed, final coast and brake durations, the brake rate per ATB-EG step and the
     recognised regimes' shares of the running time. None where a feature is undefined."""
-    from estimators.driving_regimes import REGIME_NAMES, features, recognise
+    from estimators.driving_regimes import REGIME_NAMES, features, recogniser
 
     v, a, f = (np.asarray(est[f"{name}.{k}"]) for k in ("v", "acceleration", "effort"))
-    regimes = recognise(v, a, f)
+    regimes = recogniser(recogniser_name)(t, v, a, f)
     feats = features(t, v, a, f, regimes)
     dt = np.r_[0.0, np.diff(t)]
     running = float(dt[regimes != 0].sum()) or 1.0
@@ -83,6 +84,7 @@ class TrainResistanceMeasured(Study):
     def bind(self, system) -> dict:
         """The roles, and the check that the run outlasts one GNSS sample (the step size)."""
         roles = super().bind(system)
+        roles["regime_recognisers"] = regime_recognisers(system)
         spec = next(o for o in system.observers if o.name == REFERENCE)
         roles["gnss_period"] = period = spec.period if spec.period is not None else system.step_size
         span = table_span(str(roles["file"]))
@@ -113,7 +115,7 @@ class TrainResistanceMeasured(Study):
                          "position_residual_m": float(np.sqrt(np.mean(e_s * e_s))),
                          "seconds": float(run.base["observers"].get(name, {}).get("wall_time_s", float("nan")))}
             if f"{name}.acceleration" in est and f"{name}.effort" in est:
-                out[name]["features"] = features_of(t, est, name)
+                out[name]["features"] = features_of(t, est, name, roles["regime_recognisers"].get(name, "paper"))
         return out
 
     def report_md(self, metrics: dict) -> str:
