@@ -106,11 +106,15 @@ def bind_role(system, role: Role):
 @dataclass
 class RunData:
     """What a finished run hands the study: recorded signals and estimates (name -> array,
-    with ``time``), the run's base metrics, and the study's roles bound to this system."""
+    with ``time``), the run's base metrics, the study's roles bound to this system, and
+    ``observers``: each observer's finished estimator object by name (online and offline;
+    a switched-off one is absent), for what its per-sample outputs do not carry, e.g.
+    ``run.observers["smoother"].error_samples(...)``."""
     signals: dict[str, np.ndarray]
     estimates: dict[str, np.ndarray]
     base: dict
     roles: dict[str, Any] = field(default_factory=dict)
+    observers: dict[str, Any] = field(default_factory=dict)
 
 
 class Study:
