@@ -691,15 +691,18 @@ def ecef_to_lla(x: float, y: float, z: float) -> tuple[float, float, float]:
 
 def vector_distance(points, a, b) -> tuple[np.ndarray, np.ndarray]:
     """Alignment and level (m) of ``points`` (n, 3; NED in n0) from the chord ``a`` -> ``b``
-    (eq. 14 with eq. 15's angles)."""
+    (eq. 14 with eq. 15's angles). Stacked chords broadcast: ``a``, ``b`` (..., 3) with
+    ``points`` (..., n, 3) give (..., n) (many chords, or many sampled error trajectories,
+    in one call)."""
     points, a, b = (np.asarray(x, dtype=float) for x in (points, a, b))
-    d = b - a
-    hor = math.hypot(d[0], d[1])
-    lc = math.sqrt(hor * hor + d[2] * d[2])
-    sa, ca = d[1] / hor, d[0] / hor
-    sl, cl = -d[2] / lc, hor / lc
-    e = np.atleast_2d(points) - a
-    return -e[:, 0] * sa + e[:, 1] * ca, e[:, 0] * sl * ca + e[:, 1] * sl * sa + e[:, 2] * cl
+    d = (b - a)[..., None, :]
+    hor = np.hypot(d[..., 0], d[..., 1])
+    lc = np.sqrt(hor * hor + d[..., 2] * d[..., 2])
+    sa, ca = d[..., 1] / hor, d[..., 0] / hor
+    sl, cl = -d[..., 2] / lc, hor / lc
+    e = np.atleast_2d(points) - a[..., None, :]
+    return (-e[..., 0] * sa + e[..., 1] * ca,
+            e[..., 0] * sl * ca + e[..., 1] * sl * sa + e[..., 2] * cl)
 
 
 def chord_irregularity(position: Callable, design: Callable, s, chord_start: float,

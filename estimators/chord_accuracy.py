@@ -1,0 +1,340 @@
+r"""Accuracy of the 30 m chord irregularities of a trolley survey (Jiang et al. (2017), § 5):
+the chord errors that position errors cause, their prediction from the smoother's joint
+Gaussian, the closed forms of eqs. 29-31 and the sensitivity curves of Figs. 8-11.
+
+Chords and grid
+---------------
+The survey's chords are those of :func:`models.track_geometry.chord_irregularity_along`:
+consecutive chords ``[c, c + l]``, ``c = 0, l, 2 l, ...`` (``l`` = 30 m), points
+``s = c, c + ds, ..., c + l - o`` (``ds`` = 0.5 m, offset ``o`` = 5 m) and the irregularity
+of eq. 1, ``(d_s - d_{s+o}) - (dbar_s - dbar_{s+o})``, ``d`` the vector distance (eqs. 13-15,
+:func:`models.track_geometry.vector_distance`) of a surveyed point from its chord. The
+design terms ``dbar`` are the same for the estimate and the truth, so the **chord error**
+of a point is ::
+
+    Delta_s = [d_s - d_{s+o}](r + e) - [d_s - d_{s+o}](r)          (alignment, level; m)
+
+with ``r`` the true positions (n0 NED) of the four points it needs (``s``, ``s + o`` and
+the chord's ends) and ``e`` their position errors. :func:`chord_grid` picks, from the true
+along-track distance of a record, the record sample nearest to each grid distance
+(multiples of ``ds``); :func:`chord_errors` evaluates ``Delta`` exactly (not linearised),
+vectorised over any leading axes of ``e`` (one run, or ``S`` sampled error trajectories).
+The errors are local NED, the positions n0: the two frames turn apart by the arc over the
+Earth's radius, 1e-4 rad after 600 m, which changes a chord error by 1e-4 of itself (0.1 um
+per mm): neglected.
+
+Linearisation (the covariance map)
+----------------------------------
+To first order ``Delta_s = J_s [e_s, e_{s+o}, e_a, e_b]``; for a straight chord due north
+this is eqs. 21-22, ``Delta_y = e_E(s) - e_E(s + o) + (o / l) (e_E(b) - e_E(a))``.
+:func:`chord_error_jacobian` gives ``J`` (central differences of the exact map; the map is
+smooth, so they are exact to ~1e-9 relative), the map a covariance goes through. It leaves
+out terms of second order in the errors: the chord turns by ``~|e_b - e_a| / l`` and a point
+moves along it by its along-track error, so the neglected part is about
+``|e_s - e_{s+o}| |e_b - e_a| / l``: 1e-8 m for millimetre relative errors, ~1e-5 m for
+the 10 cm errors of an unaided INS (measured in ``tests/test_chord_accuracy.py``).
+
+Prediction of the paper's statistic
+-----------------------------------
+The paper's figure of merit (Fig. 12) is, per run, the maximum ``|Delta|`` over all surveyed
+chord points, and over runs its RMS. From ``S`` samples of the smoother's joint Gaussian of
+the position errors at the grid samples (``AidedInsSmoother.error_samples``, or
+``covariance_analysis(...).error_samples``) :func:`predict_chord_sigma` returns
+``sqrt(mean_S max_s Delta^2)`` for alignment and level, the pointwise RMS of ``Delta`` along
+the track (for the plots), and the relative standard error of the prediction (delta method:
+``se(RMS) / RMS = std(M^2) / (2 sqrt(S) mean(M^2))``, ``M`` the per-sample maximum). For the
+paper's 30 m run ``std(M^2) / mean(M^2)`` is about 1.3 (alignment) and 1.4 (level) (measured
+in the tests: the maximum of a 51-point chord error is nearly a 2-D Gaussian's norm), so
+``S`` = 1000 (:data:`DEFAULT_SAMPLES`) gives 2 % (the Monte Carlo of 500 runs it is compared
+with has 3 %); the chord part costs ~2 ms for a 30 m run and ~20 ms for 600 m.
+
+Closed forms (eqs. 29-31)
+-------------------------
+The paper's simplified case: the error model of eq. 20 (eq. 7 without Earth rate and
+Coriolis: ``phi_N' = -eps_N``, ``phi_D' = -eps_D``, ``dv_N' = g phi_E``, ``dv_E' = -g phi_N``,
+``dv_D' = nabla_D``, ``dr' = dv``), no system noise, a straight track due north run in time
+``T`` at constant speed, the initial covariance of eq. 25 with ``p_dv = sigma_v^2`` and
+``p_dr = sigma_r^2``, one velocity + position update at ``T`` (sigmas ``sigma_v``,
+``sigma_r``), RTS smoothing. Without system noise the smoothed error is the posterior error
+of the initial state propagated, ``dr_E(t) = dr_0 + dv_0 t - g phi_N t^2 / 2 + g eps_N t^3 / 6``,
+``dr_D(t) = dr_0 + dv_0 t + nabla_D t^2 / 2``, and eqs. 21-22 cancel every term linear in
+``t``. With ``t_s`` the time of ``s``, ``t_s + k T`` that of ``s + o`` (``k = o / l``)::
+
+    Q2 = k T ((1 - k) T - 2 t_s) / 2
+    Q3 = k T ((1 - k^2) T^2 - 3 k T t_s - 3 t_s^2) / 6
+    Var Delta_y = g^2 (Q2^2 P_phiphi - 2 Q2 Q3 P_phieps + Q3^2 P_epseps)          (eq. 29)
+    Var Delta_z = Q2^2 P_nabla = Q2^2 2 p_nabla sigma_v^2 / (p_nabla T^2 + 2 sigma_v^2)   (eq. 30)
+
+with the posterior of ``(phi_N, eps_N)`` after the update (``w = 1 / sigma_r^2``)::
+
+    D        = 576 sv2 + 288 T^2 g^2 pphi + 72 T^4 g^2 peps
+               + w (144 T^2 sv2^2 + 72 T^4 g^2 pphi sv2 + 20 T^6 g^2 peps sv2 + T^8 g^4 pphi peps)
+    P_phiphi = 4 pphi (144 sv2 + 18 T^4 g^2 peps + w (36 T^2 sv2^2 + 5 T^6 g^2 peps sv2)) / D
+    P_phieps = 36 T^3 g^2 pphi peps (4 + w T^2 sv2) / D
+    P_epseps = 72 peps (4 + w T^2 sv2) (T^2 g^2 pphi + 2 sv2) / D
+
+``w = 0`` (no position update) is eq. 31. Derived with sympy and checked against the
+12-state system (``expm``, a Kalman update, the RTS smoother's covariances and
+cross-covariances between ``0, t_s, t_s + k T, T``) in the tests. **Errata / reading
+notes**: the paper writes these for its chord only, ``k = 1/6``, having put ``T = 6 k T``
+(its ``5 k T`` is ``(1 - k) T``, its ``35 k^2 T^2`` is ``(1 - k^2) T^2 = 35 k^2 T^2``); here
+``k`` is free and at ``k = 1/6`` the expressions equal the printed eqs. 29 and 31 term by
+term. Eq. 30's denominator is ``4 (sigma_v^2 + 18 k^2 p_nabla T^2)`` (the PDF's text reads
+like ``4 sigma_v^2 + 18 k^2 p_nabla T^2``, which is wrong by up to a factor 4).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from models.track_geometry import vector_distance
+
+#: samples of the joint Gaussian per prediction: ~2 % relative standard error (module doc)
+DEFAULT_SAMPLES = 1000
+MM = 1e3
+
+
+# ---- the grid -------------------------------------------------------------------------------
+
+@dataclass
+class ChordGrid:
+    """Grid samples of a run and the chord points on them.
+
+    ``distance`` (m, n_grid): the grid distances reached, ``sample`` (n_grid): the record
+    sample nearest to each; ``chord_start`` (m, n_chords): the surveyed chords (both ends
+    reached); ``s`` (m, n_points): each chord point's distance, chord by chord;
+    ``index`` (4, n_points): grid indices of ``s``, ``s + offset``, the chord's start, end;
+    ``chord_index`` (n_chords, l / ds + 1): grid indices of each chord's grid points."""
+
+    distance: np.ndarray
+    sample: np.ndarray
+    chord_start: np.ndarray
+    s: np.ndarray
+    index: np.ndarray
+    chord_index: np.ndarray
+    ds: float
+    chord_length: float
+    offset: float
+
+    @property
+    def n_points(self) -> int:
+        return self.s.size
+
+
+def chord_grid(distance, ds: float = 0.5, chord_length: float = 30.0, offset: float = 5.0) -> ChordGrid:
+    """The survey's chord grid on a record whose samples have the true along-track
+    ``distance`` (m, non-decreasing; the trolley's ``distance``).
+
+    Grid distances are the multiples of ``ds`` in ``[distance[0], distance[-1]]`` (a grid
+    point the run does not reach is left out); each takes the nearest record sample, the
+    first of a stop (so a stop does not duplicate points). A chord ``[j l, (j + 1) l]`` is
+    surveyed when both its ends are on the grid."""
+    dist = np.asarray(distance, dtype=float)
+    if dist.ndim != 1 or dist.size < 2 or not np.all(np.isfinite(dist)):
+        raise ValueError("distance must be a finite 1-D array of at least two samples")
+    if np.any(np.diff(dist) < 0.0):
+        raise ValueError("distance must not decrease (the chord grid assumes a forward run)")
+    n_chord, n_off = chord_length / ds, offset / ds
+    if abs(n_chord - round(n_chord)) > 1e-9 or abs(n_off - round(n_off)) > 1e-9 or offset >= chord_length:
+        raise ValueError("chord_length and offset must be multiples of ds, offset < chord_length")
+    n_chord, n_off = int(round(n_chord)), int(round(n_off))
+    tol = 1e-9 * max(1.0, abs(dist[-1]))
+    j0 = int(math.ceil((dist[0] - tol) / ds))
+    j1 = int(math.floor((dist[-1] + tol) / ds))
+    if j1 < j0:
+        raise ValueError("the run covers no grid point")
+    jj = np.arange(j0, j1 + 1)
+    grid = jj * ds
+    right = np.clip(np.searchsorted(dist, grid, side="left"), 0, dist.size - 1)
+    left = np.clip(right - 1, 0, dist.size - 1)
+    left = np.searchsorted(dist, dist[left], side="left")  # the first sample of a stop
+    sample = np.where(np.abs(dist[left] - grid) < np.abs(dist[right] - grid), left, right)
+    # chords: ends on the grid; grid index of multiple j is j - j0
+    first = -(-j0 // n_chord)
+    starts = np.arange(first, (j1 - n_chord) // n_chord + 1) * n_chord
+    pts = np.arange(n_chord - n_off + 1)
+    js = (starts[:, None] + pts[None, :]).ravel()
+    ja = np.repeat(starts, pts.size)
+    index = np.stack([js, js + n_off, ja, ja + n_chord]) - j0
+    chord_index = starts[:, None] - j0 + np.arange(n_chord + 1)[None, :]
+    return ChordGrid(grid, sample, starts * ds, js * ds, index, chord_index, ds, chord_length, offset)
+
+
+# ---- exact chord errors ---------------------------------------------------------------------
+
+def _irregularity(ps, po, a, b):
+    """``d_s - d_{s+o}`` (alignment, level) of points ``ps``, ``po`` (..., n, 3) against the
+    chords ``a -> b`` (..., n, 3), one chord per point: one call of eq. 14 for all."""
+    y, z = vector_distance(np.stack([ps, po], axis=-2), a, b)
+    return y[..., 0] - y[..., 1], z[..., 0] - z[..., 1]
+
+
+def _slots(grid: ChordGrid, q):
+    return tuple(q[..., i, :] for i in grid.index)
+
+
+def chord_errors(grid: ChordGrid, true_positions, position_errors) -> tuple[np.ndarray, np.ndarray]:
+    """Exact chord errors (alignment, level; m) of every chord point, shape (..., n_points).
+
+    ``true_positions`` (n_grid, 3): n0 NED (m) at the grid samples (the trolley's
+    ``north, east, down`` at ``grid.sample``); ``position_errors`` (..., n_grid, 3): estimate
+    minus truth (local NED, m), any leading axes (one run ``(n_grid, 3)``, samples
+    ``(S, n_grid, 3)``)."""
+    r = np.asarray(true_positions, dtype=float)
+    e = np.asarray(position_errors, dtype=float)
+    if r.shape != (grid.distance.size, 3) or e.shape[-2:] != r.shape:
+        raise ValueError(f"true positions {r.shape} and errors {e.shape} must be (..., {grid.distance.size}, 3)")
+    ya, za = _along_chords(grid, r + e)
+    yt, zt = _along_chords(grid, r)
+    return ya - yt, za - zt
+
+
+def _along_chords(grid: ChordGrid, q):
+    """``d_s - d_{s+o}`` of every chord point: eq. 14 once per chord for its ``l / ds + 1``
+    grid points (the points ``s`` and ``s + o`` of a chord are those), then differences."""
+    ci = grid.chord_index
+    pts = q[..., ci, :]  # (..., n_chords, l/ds + 1, 3)
+    y, z = vector_distance(pts, pts[..., 0, :], pts[..., -1, :])
+    n_off = int(round(grid.offset / grid.ds))
+    n = ci.shape[1] - n_off
+    shape = y.shape[:-2] + (-1,)
+    return ((y[..., :n] - y[..., n_off:]).reshape(shape), (z[..., :n] - z[..., n_off:]).reshape(shape))
+
+
+def chord_error_jacobian(grid: ChordGrid, true_positions, step: float = 1e-4) -> np.ndarray:
+    """The linearised map (the covariance map): ``J`` (2, n_points, 4, 3) with
+    ``Delta[c, n] ~= sum_{u, i} J[c, n, u, i] e[grid.index[u, n], i]`` (c: alignment, level;
+    u: the point ``s``, ``s + offset``, the chord's start, end; i: N, E, D). Central
+    differences of the exact map with ``step`` (m): its third derivative is ~1/l^2, so the
+    truncation is ~step^2 / l^2 = 1e-11 relative."""
+    r = np.asarray(true_positions, dtype=float)
+    base = _slots(grid, r)
+    J = np.empty((2, grid.n_points, 4, 3))
+    for u in range(4):
+        for i in range(3):
+            h = np.zeros(3)
+            h[i] = step
+            plus = [q + h if v == u else q for v, q in enumerate(base)]
+            minus = [q - h if v == u else q for v, q in enumerate(base)]
+            yp, zp = _irregularity(*plus)
+            ym, zm = _irregularity(*minus)
+            J[0, :, u, i] = (yp - ym) / (2.0 * step)
+            J[1, :, u, i] = (zp - zm) / (2.0 * step)
+    return J
+
+
+def linear_chord_errors(grid: ChordGrid, jacobian, position_errors) -> tuple[np.ndarray, np.ndarray]:
+    """The first-order chord errors ``J e`` (alignment, level; m), shape (..., n_points)."""
+    e = np.asarray(position_errors, dtype=float)
+    E = np.stack(_slots(grid, e), axis=-2)  # (..., n, 4, 3)
+    out = np.einsum("cnui,...nui->c...n", np.asarray(jacobian), E)
+    return out[0], out[1]
+
+
+def chord_error_statistics(alignment, level) -> dict:
+    """The paper's per-run statistic and the rms (mm): max |error| over all surveyed chord
+    points and the rms over them, under the study's metric names. Leading axes (runs or
+    samples) are kept: the values are then arrays."""
+    a, v = np.abs(np.asarray(alignment)), np.abs(np.asarray(level))
+    out = {"chord_alignment_max_error_mm": MM * a.max(axis=-1),
+           "chord_level_max_error_mm": MM * v.max(axis=-1),
+           "chord_alignment_rms_error_mm": MM * np.sqrt(np.mean(a * a, axis=-1)),
+           "chord_level_rms_error_mm": MM * np.sqrt(np.mean(v * v, axis=-1))}
+    return {k: (float(x) if np.ndim(x) == 0 else x) for k, x in out.items()}
+
+
+# ---- prediction from samples of the smoother's joint Gaussian ---------------------------------
+
+@dataclass
+class ChordPrediction:
+    """Predicted accuracy of a survey's chords from ``n_samples`` error trajectories.
+
+    ``sigma_alignment_mm``, ``sigma_level_mm``: the predicted RMS over runs of the per-run
+    max |chord error| (the paper's Fig. 12 statistic); ``relative_se_alignment``,
+    ``relative_se_level``: their relative standard errors (sampling); ``pointwise_alignment_mm``,
+    ``pointwise_level_mm`` (n_points): the RMS of the chord error at each point (its sigma;
+    the mean is 0), at distances ``s`` (m)."""
+
+    sigma_alignment_mm: float
+    sigma_level_mm: float
+    relative_se_alignment: float
+    relative_se_level: float
+    pointwise_alignment_mm: np.ndarray
+    pointwise_level_mm: np.ndarray
+    s: np.ndarray
+    n_samples: int
+
+    def metrics(self) -> dict:
+        """The study's metric names."""
+        return {"predicted_sigma_alignment_mm": self.sigma_alignment_mm,
+                "predicted_sigma_level_mm": self.sigma_level_mm}
+
+
+def _rms_and_se(m: np.ndarray) -> tuple[float, float]:
+    m2 = m * m
+    mean = float(m2.mean())
+    se = float(m2.std(ddof=1)) / (2.0 * math.sqrt(m2.size) * mean) if m2.size > 1 and mean > 0 else math.inf
+    return math.sqrt(mean), se
+
+
+def predict_chord_sigma(grid: ChordGrid, true_positions, error_samples) -> ChordPrediction:
+    """Prediction from ``error_samples`` (S, n_grid, 3): samples of the smoothed position
+    error (local NED, m) at the grid samples, drawn from the smoother's joint Gaussian
+    (e.g. ``obs.error_samples(times[grid.sample], S, seed)``). See the module doc for the
+    precision against ``S``."""
+    e = np.asarray(error_samples, dtype=float)
+    if e.ndim != 3:
+        raise ValueError(f"error samples must be (S, n_grid, 3), got {e.shape}")
+    a, v = chord_errors(grid, true_positions, e)
+    sa, ra = _rms_and_se(np.abs(a).max(axis=-1))
+    sv, rv = _rms_and_se(np.abs(v).max(axis=-1))
+    return ChordPrediction(MM * sa, MM * sv, ra, rv, MM * np.sqrt(np.mean(a * a, axis=0)),
+                           MM * np.sqrt(np.mean(v * v, axis=0)), grid.s.copy(), e.shape[0])
+
+
+# ---- closed forms of the simplified case (eqs. 29-31) ------------------------------------------
+
+def _q2_q3(t_s, k, T):
+    t_s = np.asarray(t_s, dtype=float)
+    q2 = k * T * ((1.0 - k) * T - 2.0 * t_s) / 2.0
+    q3 = k * T * ((1.0 - k * k) * T * T - 3.0 * k * T * t_s - 3.0 * t_s * t_s) / 6.0
+    return q2, q3
+
+
+def alignment_variance(t_s, k: float, T: float, g: float, p_phi: float, p_eps: float, sigma_v: float,
+                       sigma_r: float = math.inf):
+    """Eq. 29 (eq. 31 for ``sigma_r = inf``, no position update): the variance (m^2) of the
+    alignment chord error at the point passed at ``t_s`` (s, array allowed; ``0 <= t_s <=
+    (1 - k) T``) of a chord run in ``T`` (s), ``k = offset / chord_length``; ``g`` (m/s^2),
+    ``p_phi`` the initial tilt variance (rad^2), ``p_eps`` the gyro bias variance
+    ((rad/s)^2), ``sigma_v`` (m/s), ``sigma_r`` (m) the update sigmas (also the initial
+    velocity and position sigmas). Module doc: the formula, its derivation and the errata."""
+    sv2, w = sigma_v * sigma_v, 0.0 if math.isinf(sigma_r) else 1.0 / (sigma_r * sigma_r)
+    g2, T2 = g * g, T * T
+    D = (576 * sv2 + 288 * T2 * g2 * p_phi + 72 * T2 ** 2 * g2 * p_eps
+         + w * (144 * T2 * sv2 ** 2 + 72 * T2 ** 2 * g2 * p_phi * sv2 + 20 * T2 ** 3 * g2 * p_eps * sv2
+                + T2 ** 4 * g2 * g2 * p_phi * p_eps))
+    P_ff = 4 * p_phi * (144 * sv2 + 18 * T2 ** 2 * g2 * p_eps + w * (36 * T2 * sv2 ** 2 + 5 * T2 ** 3 * g2 * p_eps * sv2)) / D
+    P_fe = 36 * T2 * T * g2 * p_phi * p_eps * (4 + w * T2 * sv2) / D
+    P_ee = 72 * p_eps * (4 + w * T2 * sv2) * (T2 * g2 * p_phi + 2 * sv2) / D
+    q2, q3 = _q2_q3(t_s, k, T)
+    return g2 * (q2 * q2 * P_ff - 2.0 * q2 * q3 * P_fe + q3 * q3 * P_ee)
+
+
+def level_variance(t_s, k: float, T: float, p_nabla_D: float, sigma_v: float):
+    """Eq. 30: the variance (m^2) of the level chord error at ``t_s`` (as
+    :func:`alignment_variance`); ``p_nabla_D`` the vertical accelerometer bias variance
+    ((m/s^2)^2). The position update does not enter."""
+    q2, _ = _q2_q3(t_s, k, T)
+    sv2 = sigma_v * sigma_v
+    return q2 * q2 * 2.0 * p_nabla_D * sv2 / (p_nabla_D * T * T + 2.0 * sv2)
+
+
+def closed_form_sigma(t_s, k: float, T: float, g: float, p_phi: float, p_eps: float, p_nabla_D: float,
+                      sigma_v: float, sigma_r: float = math.inf) -> tuple[np.ndarray, np.ndarray]:
+    """Eqs. 29-31 as sigmas (m): (alignment, level) at ``t_s``."""
+    return (np.sqrt(alignment_variance(t_s, k, T, g, p_phi, p_eps, sigma_v, sigma_r)),
+            np.sqrt(level_variance(t_s, k, T, p_nabla_D, sigma_v)))
