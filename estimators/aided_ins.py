@@ -1,0 +1,759 @@
+r"""The ZUPT-aided INS of the trolley survey (Jiang et al. (2017), §4): an error-state Kalman
+filter on the strapdown INS with closed-loop feedback, the Rauch-Tung-Striebel smoother over
+the run (eq. 12), sampling of the smoother's joint error distribution, and the same
+recursions without data (the paper's covariance analysis, §5).
+
+Forward pass. The :class:`~estimators.strapdown.Strapdown` integrates the measured increments at
+the IMU rate (``Strapdown.integrate`` on the chunk of each KF epoch); the error covariance runs at
+the epochs ``t_k`` (``filter_period`` apart) with the error model of
+:mod:`estimators.ins_error_model` (``A`` held at the epoch's mean specific force
+``f^n = (v_k - v_{k-1}) / T - g^n + (2 omega_ie + omega_en) x v``, exact for the mechanisation,
+and its mid-epoch attitude)::
+
+    b_k = Phi_{k-1} a_{k-1},     P-_k = Phi_{k-1} P+_{k-1} Phi_{k-1}^T + Q_{k-1}     (eq. 11)
+    x+_k = b_k + K_k (z_k - H_k b_k),  P+_k Joseph form            (estimators.kalman.update)
+    c_k = (x+_k of phi, dv, dr; 0 for the biases),   a_k = x+_k - c_k                feedback
+
+Reset convention: the navigation part ``c_k`` of the estimate is fed back into the INS at every
+epoch (``Strapdown.set_state``: ``C <- exp([phi x]) C``, ``v <- v - dv``, position moved by
+``-dr``), after which the navigation error estimate is zero; the bias estimates stay in the
+filter's state ``a_k`` (the INS integrates the raw increments) and act through ``Phi`` on the
+next prediction, which is fed back in its turn. The covariance is unchanged by the reset (its
+Jacobian ``I - [phi/2 x]`` differs from I by < 1e-4). Without feedback (``feedback=False``)
+``c_k = 0`` and this is the textbook open-loop filter around the free INS.
+
+Backward pass (RTS, eq. 12) on the errors relative to the *fed-back* nominal ``n_k^+``: the
+INS carries ``n_k^+`` to ``n_{k+1}^-``, so ``Phi_k`` maps errors of ``n_k^+`` to errors of
+``n_{k+1}^-``, and an error relative to ``n_{k+1}^-`` is the one relative to ``n_{k+1}^+``
+plus ``c_{k+1}``::
+
+    C_k = P+_k Phi_k^T (P-_{k+1})^-1
+    s_N = a_N,                     s_k = a_k + C_k (s_{k+1} + c_{k+1} - b_{k+1})
+    P^s_N = P+_N,                  P^s_k = P+_k + C_k (P^s_{k+1} - P-_{k+1}) C_k^T
+
+and the smoothed navigation at epoch ``k`` is ``n_k^+`` corrected by ``s_k``. With
+``feedback=False`` (``c = 0``, ``a = x+``) this is :func:`estimators.smoothers.rts` term for term
+(``tests/test_aided_ins.py``). All ``C_k`` come from the forward record alone: they are solved
+in blocks of epochs at once (batched, in the correlation-scaled form of
+:func:`estimators.smoothers.spd_inverse`), leaving two ``n x n`` products per epoch in the loop.
+
+Between epochs the smoothed navigation at each IMU sample is the INS's sample corrected by the
+correction interpolated linearly between ``s_{k-1}`` (at ``t_{k-1}``, relative to ``n_{k-1}^+``,
+where the chunk starts) and ``s_k + c_k`` (at ``t_k``, relative to ``n_k^-``, where it ends).
+The error this makes is the curvature of the smoothed error over one epoch, ``|e''| T^2 / 8``:
+for the position ``(g |phi| + |nabla|) T^2 / 8`` ~ 1e-4 m/s2 x 3e-4 s2 = 3e-8 m. The
+``sigma_*`` outputs interpolate the smoothed variances the same way.
+
+Smoother's joint errors (:meth:`SmootherRecord.error_samples`). The RTS smoothing errors
+``e_k = x_k - x^s_k`` form a backward Markov chain (Rauch, Tung & Striebel 1965)::
+
+    e_N ~ N(0, P+_N),    e_k = C_k e_{k+1} + w_k,   w_k ~ N(0, P+_k - C_k P-_{k+1} C_k^T)
+
+independent ``w_k``: sampling it backwards gives draws with the exact joint covariance
+``Cov(e_k, e_j) = C_k ... C_{j-1} P^s_j`` (``k < j``). ``P+_k - C_k P-_{k+1} C_k^T`` is formed
+as ``(I - C_k Phi_k) P+_k (I - C_k Phi_k)^T + C_k Q_k C_k^T`` (the same matrix, a sum of PSD
+terms) and factored by its eigen-decomposition.
+
+Measurements (the observer's ``measurements``; NaN or masked: absent):
+
+* ``stopped`` (0/1): zero-velocity update ``z = v~^n``, ``H = [0 I 0]``, ``R = zupt_sigma^2 I`` at
+  the epochs whose sample is stopped: every such epoch (``zupt_interval = 0``), the first of a
+  stop and then every ``zupt_interval`` s, or one per stop at its middle epoch
+  (``zupt_interval = inf``, the paper's "one update per stop"). ``zupt_source="detector"`` takes
+  the stops from ``estimators.zupt_detector.detect_stationary`` on the increments instead and
+  reports its misses and false alarms against the flag.
+* non-holonomic constraint (``nhc``): ``z = (v~^b_y, v~^b_z)``, the rows y, z of
+  ``ErrorModel.body_velocity_rows``, ``R = nhc_sigma^2 I``, at the epochs without a ZUPT. On
+  the ``Trolley`` FMU the body point rides the rail and x is the rail tangent, so the
+  constraint is exact unless its ``wobble`` is set; ``nhc_sigma`` (default 1 mm/s) covers a
+  wobble of that size.
+* odometer (``odometer``, m, cumulative): speed form. ``z = x_b^T (r_k - r_{k-1}) / T -
+  (s_k - s_{k-1}) / T``, the INS's mean body-x speed over the epoch (its own position
+  increment, ``x_b`` at mid-epoch) minus the odometer's, with the body-x row of
+  ``body_velocity_rows`` at the epoch's end. Why speed, not distance: the distance travelled
+  by the INS is the integral of a state (a delayed-state or an extra distance-offset state
+  would be needed), while the mean speed over one epoch differs from the end velocity error
+  by ``|dv'| T / 2`` < 3e-5 m/s, below ``odometer_sigma`` (default 1 mm/s); the odometer's
+  scale-factor error is not a state (a 100 ppm scale factor is 1e-4 m/s at 1 m/s).
+* landmarks (``landmark_latitude``, ``landmark_longitude`` (rad), ``landmark_height`` (m)):
+  ``z = r~(t_j) - r_landmark`` (local NED), ``H = [0 0 I]``, ``R = landmark_sigma^2 I``, at the
+  epoch that ends the chunk with the fix's sample ``t_j`` (the INS position at ``t_j`` itself;
+  the error moves by ``dv (t_k - t_j)`` < 1e-5 m in between). A fix held over consecutive
+  samples (the same three values) is one fix, used once.
+
+Memory: per epoch the record holds ``Phi``, ``P-``, ``P+``, ``C``, ``P^s`` (``n^2`` floats each)
+and four state vectors; per IMU sample the INS's navigation (9 floats). Up to
+``memory_budget_mb`` (default 256 MB; a 700 s run at 20 Hz epochs with 15 states takes 77 MB)
+they are numpy arrays in RAM; beyond it the same arrays are ``np.memmap`` files in a temporary
+directory (removed with the observer), so a long run's peak memory is the budget, not the
+run; the results are identical (``tests/test_aided_ins.py`` runs with a 0.01 MB budget).
+
+Settings (all optional; SSD ``rf:Setting`` or keyword arguments):
+
+=============================  ======  ==========================================================
+``latitude, longitude``        rad     initial true position (bound to the trolley's first sample)
+``height``                     m       initial true height
+``vn, ve, vd``                 m/s     initial true velocity
+``roll, pitch, heading``       rad     initial true attitude
+``tilt_error_north/east``      rad     initial attitude error as ``StrapdownINS``: the INS starts
+``heading_error``              rad     at ``exp([e x]) C_true`` (``e = -phi``)
+``velocity_error_north/east/   m/s     added to the initial velocity
+down``
+``tilt_sigma``                 rad     P0 of phi_N, phi_E (default 0.006 deg)
+``heading_sigma``              rad     P0 of phi_D (0.06 deg)
+``velocity_sigma``             m/s     P0 of dv (1e-4)
+``position_sigma``             m       P0 of dr (0.1)
+``gyro_arw_deg_sqrt_h`` ...    grade   the IMU grade in the ``ImuErrors`` names and units
+                                       (``ImuGrade``; default navigation grade)
+``error_model``                --      ``"paper12"`` (default) or ``"full15"``
+``filter_period``              s       KF epoch (0.05; a whole number of IMU steps)
+``feedback``                   bool    closed-loop error feedback (default true)
+``zupt``                       bool    zero-velocity updates (true)
+``zupt_sigma``                 m/s     1e-4
+``zupt_interval``              s       0: every stopped epoch; inf: one per stop
+``zupt_source``                --      ``"flag"`` (the ``stopped`` measurement) or ``"detector"``
+``nhc``, ``nhc_sigma``         -, m/s  non-holonomic constraint (false, 1e-3)
+``odometer``,                  -, m/s  odometer speed (false, 1e-3)
+``odometer_sigma``
+``landmarks``,                 -, m    landmark position fixes (false, 0.1)
+``landmark_sigma``
+``memory_budget_mb``           MB      RAM for the record before spilling to disk (256)
+=============================  ======  ==========================================================
+"""
+
+from __future__ import annotations
+
+import math
+import tempfile
+import time
+from dataclasses import fields
+from typing import Any, ClassVar
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from estimators import kalman
+from estimators.attitude import dcm_from_rph, perturb, rph_from_dcm
+from estimators.ins_error_model import (DR, DV, PHI, ErrorModel, ImuGrade, corrected_position,
+                                        ned_difference)
+from estimators.ins_observer import INCREMENTS
+from estimators.observer import OfflineObserver
+from estimators.strapdown import NAV, Strapdown
+from models import earth
+
+DEG = math.pi / 180.0
+MEASUREMENTS = ("stopped", "odometer", "landmark_latitude", "landmark_longitude", "landmark_height")
+SIGMAS = ("sigma_north", "sigma_east", "sigma_down")
+_GRADE_NAMES = tuple(f.name for f in fields(ImuGrade))
+#: KF epochs per block of the forward pass (feedback at the end of each)
+BLOCK = 20
+
+_DEFAULTS: dict[str, Any] = {
+    "latitude": 0.0, "longitude": 0.0, "height": 0.0, "vn": 0.0, "ve": 0.0, "vd": 0.0,
+    "roll": 0.0, "pitch": 0.0, "heading": 0.0,
+    "tilt_error_north": 0.0, "tilt_error_east": 0.0, "heading_error": 0.0,
+    "velocity_error_north": 0.0, "velocity_error_east": 0.0, "velocity_error_down": 0.0,
+    "tilt_sigma": 0.006 * DEG, "heading_sigma": 0.06 * DEG, "velocity_sigma": 1e-4, "position_sigma": 0.1,
+    **{f.name: f.default for f in fields(ImuGrade)},
+    "error_model": "paper12", "filter_period": 0.05, "feedback": True,
+    "zupt": True, "zupt_sigma": 1e-4, "zupt_interval": 0.0, "zupt_source": "flag",
+    "nhc": False, "nhc_sigma": 1e-3, "odometer": False, "odometer_sigma": 1e-3,
+    "landmarks": False, "landmark_sigma": 0.1, "memory_budget_mb": 256.0,
+}
+_BOOLS = ("feedback", "zupt", "nhc", "odometer", "landmarks")
+_CHOICES = {"error_model": ("paper12", "full15"), "zupt_source": ("flag", "detector")}
+_POSITIVE = ("filter_period", "zupt_sigma", "nhc_sigma", "odometer_sigma", "landmark_sigma", "memory_budget_mb")
+_NONNEGATIVE = ("tilt_sigma", "heading_sigma", "velocity_sigma", "position_sigma")
+
+
+def check_settings(owner: str, settings: dict[str, Any]) -> dict[str, Any]:
+    """The settings merged over the defaults and checked: ValueError, one line, naming the
+    setting and what is wrong."""
+    unknown = sorted(set(settings) - set(_DEFAULTS))
+    if unknown:
+        raise ValueError(f"{owner}: unknown setting(s) {unknown}; known: {sorted(_DEFAULTS)}")
+    s = {**_DEFAULTS, **settings}
+    for k, v in s.items():
+        if k in _BOOLS:
+            if not isinstance(v, (bool, np.bool_)):
+                raise ValueError(f"{owner}: {k} must be true or false, not {v!r}")
+            s[k] = bool(v)
+        elif k in _CHOICES:
+            if v not in _CHOICES[k]:
+                raise ValueError(f"{owner}: {k} must be one of {', '.join(_CHOICES[k])}, not {v!r}")
+        else:
+            if isinstance(v, str) and v.strip().lower() in ("inf", "infinity") and \
+                    (k == "zupt_interval" or k.endswith("correlation_time")):
+                v = math.inf
+            if isinstance(v, bool) or not isinstance(v, (int, float, np.floating, np.integer)) or math.isnan(v):
+                raise ValueError(f"{owner}: {k} must be a number, not {v!r}")
+            v = float(v)
+            if not math.isfinite(v) and not (k == "zupt_interval" or k.endswith("correlation_time")):
+                raise ValueError(f"{owner}: {k} must be finite, not {v!r}")
+            if k in _POSITIVE and not v > 0:
+                raise ValueError(f"{owner}: {k} must be > 0, not {v!r}")
+            if (k in _NONNEGATIVE or k == "zupt_interval" or k in _GRADE_NAMES) and v < 0:
+                raise ValueError(f"{owner}: {k} must be >= 0, not {v!r}")
+            s[k] = v
+    ImuGrade(**{k: s[k] for k in _GRADE_NAMES})  # the grade's own checks
+    return s
+
+
+class _Store:
+    """Named float64 arrays in RAM up to a byte budget, beyond it ``np.memmap`` files in a
+    temporary directory that lives as long as this object."""
+
+    def __init__(self, shapes: dict[str, tuple[int, ...]], budget_bytes: float) -> None:
+        total = sum(8 * math.prod(s) for s in shapes.values())
+        self.spilled = total > budget_bytes
+        self._dir = tempfile.TemporaryDirectory(prefix="aided_ins_") if self.spilled else None
+        self.arrays: dict[str, np.ndarray] = {}
+        for name, shape in shapes.items():
+            if self.spilled and math.prod(shape) > 0:
+                self.arrays[name] = np.lib.format.open_memmap(f"{self._dir.name}/{name}.npy", mode="w+",
+                                                              dtype=np.float64, shape=shape)
+            else:
+                self.arrays[name] = np.zeros(shape)
+
+    def __getitem__(self, name: str) -> np.ndarray:
+        return self.arrays[name]
+
+
+def _smoother_gains(Pp: np.ndarray, Pm_next: np.ndarray, Phi: np.ndarray) -> np.ndarray:
+    """``C_k = P+_k Phi_k^T (P-_{k+1})^-1`` for a block of epochs at once: ``C^T`` solves
+    ``P-_{k+1} C^T = Phi_k P+_k``, in the correlation scaling of ``P-`` (a state with zero
+    variance gets a unit pivot: its column of ``C`` is zero, the pseudo-inverse's answer)."""
+    d = np.sqrt(np.einsum("kii->ki", Pm_next))
+    zero = d <= 0.0
+    d = np.where(zero, 1.0, d)
+    corr = Pm_next / (d[:, :, None] * d[:, None, :])
+    corr = 0.5 * (corr + corr.transpose(0, 2, 1))
+    idx = np.arange(corr.shape[1])
+    corr[:, idx, idx] = np.where(zero, 1.0, corr[:, idx, idx])
+    rhs = (Phi @ Pp) / d[:, :, None]
+    CT = np.linalg.solve(corr, rhs) / d[:, :, None]
+    return CT.transpose(0, 2, 1)
+
+
+class SmootherRecord:
+    """What the smoother leaves for the error analysis: epoch times, the filter's ``P-``,
+    ``P+``, ``Phi``, ``Q`` and the RTS gains ``C``, the smoothed covariances ``P^s``. Shared by
+    :class:`AidedInsSmoother` (after ``run``) and :func:`covariance_analysis`."""
+
+    epoch_times: np.ndarray
+    state_names: tuple[str, ...]
+
+    def _init_record(self, store: _Store, names: tuple[str, ...]) -> None:
+        self._store = store
+        self.state_names = names
+        self._noise_factor: np.ndarray | None = None
+
+    @property
+    def P_filter(self) -> np.ndarray:
+        """Filtered covariances ``P+_k`` ``(N, n, n)``."""
+        return self._store["Pp"]
+
+    @property
+    def P_predicted(self) -> np.ndarray:
+        return self._store["Pm"]
+
+    @property
+    def P_smoothed(self) -> np.ndarray:
+        """Smoothed covariances ``P^s_k`` ``(N, n, n)``."""
+        return self._store["Ps"]
+
+    def nearest_epochs(self, times) -> np.ndarray:
+        t = np.atleast_1d(np.asarray(times, dtype=float))
+        j = np.clip(np.searchsorted(self.epoch_times, t), 1, max(len(self.epoch_times) - 1, 1))
+        left = self.epoch_times[j - 1]
+        right = self.epoch_times[np.minimum(j, len(self.epoch_times) - 1)]
+        return np.where(np.abs(t - left) <= np.abs(right - t), j - 1, j).clip(0, len(self.epoch_times) - 1)
+
+    def _factors(self) -> np.ndarray:
+        """Per epoch ``L_k`` with ``L_k L_k^T = P+_k - C_k P-_{k+1} C_k^T`` (the last epoch:
+        ``P+_N``), from the PSD form in the module docstring, by eigen-decomposition."""
+        if self._noise_factor is None:
+            st = self._store
+            N, n = st["Pp"].shape[:2]
+            L = np.empty((N, n, n))
+            eye = np.eye(n)
+            for a in range(0, N, 512):
+                b = min(a + 512, N)
+                S = st["Pp"][a:b].copy()
+                if b - a and a < N - 1:
+                    m = min(b, N - 1) - a
+                    C, F, Q = st["C"][a:a + m], st["Phi"][a:a + m], st["Q"][a:a + m]
+                    I_CF = eye - C @ F
+                    S[:m] = I_CF @ st["Pp"][a:a + m] @ I_CF.transpose(0, 2, 1) + C @ Q @ C.transpose(0, 2, 1)
+                S = 0.5 * (S + S.transpose(0, 2, 1))
+                w, V = np.linalg.eigh(S)
+                L[a:b] = V * np.sqrt(np.clip(w, 0.0, None))[:, None, :]
+            self._noise_factor = L
+        return self._noise_factor
+
+    def error_samples(self, times, n_samples: int, seed: int | None = None, states=DR) -> np.ndarray:
+        """``(n_samples, len(times), 3)``: draws of the smoothing error of the position (NED,
+        m; ``states`` another slice of the error state) at the epochs nearest to ``times``,
+        from the smoother's joint Gaussian (backward sampling, module docstring)."""
+        if not (isinstance(n_samples, (int, np.integer)) and n_samples >= 1):
+            raise ValueError(f"error_samples: n_samples must be a positive integer, not {n_samples!r}")
+        want = self.nearest_epochs(times)
+        if want.size == 0:
+            return np.empty((n_samples, 0, len(range(*states.indices(len(self.state_names))))))
+        L = self._factors()
+        st = self._store
+        rng = np.random.default_rng(seed)
+        N, n = L.shape[:2]
+        k_min = int(want.min())
+        width = len(range(*states.indices(n)))
+        out = np.empty((n_samples, want.size, width))
+        slots: dict[int, list[int]] = {}
+        for i, k in enumerate(want.tolist()):
+            slots.setdefault(k, []).append(i)
+        e = rng.standard_normal((n_samples, n)) @ L[N - 1].T
+        for k in range(N - 1, k_min - 1, -1):
+            if k < N - 1:
+                e = e @ st["C"][k].T + rng.standard_normal((n_samples, n)) @ L[k].T
+            for i in slots.get(k, ()):
+                out[:, i] = e[:, states]
+        return out
+
+    def joint_covariance(self, epochs) -> np.ndarray:
+        """Exact joint covariance of the smoothing errors (all states) at the given epoch
+        indices (ascending): ``Cov(e_k, e_j) = C_k ... C_{j-1} P^s_j`` for ``k < j``.
+        Shape ``(m n, m n)``; for tests and small analyses."""
+        ks = [int(k) for k in epochs]
+        n = len(self.state_names)
+        st = self._store
+        M = np.zeros((len(ks) * n, len(ks) * n))
+        for a, k in enumerate(ks):
+            M[a * n:(a + 1) * n, a * n:(a + 1) * n] = st["Ps"][k]
+            G = np.eye(n)
+            j_prev = k
+            for b in range(a + 1, len(ks)):
+                j = ks[b]
+                for m in range(j_prev, j):
+                    G = G @ st["C"][m]
+                j_prev = j
+                block = G @ st["Ps"][j]
+                M[a * n:(a + 1) * n, b * n:(b + 1) * n] = block
+                M[b * n:(b + 1) * n, a * n:(a + 1) * n] = block.T
+        return M
+
+
+def _smooth(store: _Store, block: int = 256) -> None:
+    """The backward pass (module docstring) over a store holding ``Pm, Pp, Phi, a, d``
+    (``d_k = c_k - b_k``); fills ``C``, ``Ps`` and the smoothed corrections ``s``."""
+    Pm, Pp, Phi, a, d = (store[k] for k in ("Pm", "Pp", "Phi", "a", "d"))
+    C, Ps, s = store["C"], store["Ps"], store["s"]
+    N = Pp.shape[0]
+    s[N - 1] = a[N - 1]
+    Ps[N - 1] = Pp[N - 1]
+    end = N - 1  # gains for epochs [start, end)
+    s_next, P_next = np.array(s[N - 1]), np.array(Ps[N - 1])
+    while end > 0:
+        start = max(0, end - block)
+        Cb = _smoother_gains(np.asarray(Pp[start:end]), np.asarray(Pm[start + 1:end + 1]), np.asarray(Phi[start:end]))
+        C[start:end] = Cb
+        ab, db, Ppb, Pmb = np.asarray(a[start:end]), np.asarray(d[start + 1:end + 1]), \
+            np.asarray(Pp[start:end]), np.asarray(Pm[start + 1:end + 1])
+        sb = np.empty_like(ab)
+        Psb = np.empty_like(Ppb)
+        for i in range(end - start - 1, -1, -1):
+            Ck = Cb[i]
+            s_next = ab[i] + Ck @ (s_next + db[i])
+            P_next = Ppb[i] + Ck @ (P_next - Pmb[i]) @ Ck.T
+            P_next = 0.5 * (P_next + P_next.T)
+            sb[i], Psb[i] = s_next, P_next
+        s[start:end], Ps[start:end] = sb, Psb
+        end = start
+
+
+def _quat_mul(p, q):
+    p0, p1, p2, p3 = p
+    q0, q1, q2, q3 = q
+    return (p0 * q0 - p1 * q1 - p2 * q2 - p3 * q3, p0 * q1 + p1 * q0 + p2 * q3 - p3 * q2,
+            p0 * q2 - p1 * q3 + p2 * q0 + p3 * q1, p0 * q3 + p1 * q2 - p2 * q1 + p3 * q0)
+
+
+def _quat_rotvec(x: float, y: float, z: float):
+    a2 = x * x + y * y + z * z
+    if a2 < 1e-8:
+        c, k = 1.0 - a2 / 8.0, 0.5 - a2 / 48.0
+    else:
+        a = math.sqrt(a2)
+        c, k = math.cos(0.5 * a), math.sin(0.5 * a) / a
+    return c, k * x, k * y, k * z
+
+
+def _dcm(q) -> np.ndarray:
+    q0, q1, q2, q3 = q
+    return np.array([[q0 * q0 + q1 * q1 - q2 * q2 - q3 * q3, 2 * (q1 * q2 - q0 * q3), 2 * (q1 * q3 + q0 * q2)],
+                     [2 * (q1 * q2 + q0 * q3), q0 * q0 - q1 * q1 + q2 * q2 - q3 * q3, 2 * (q2 * q3 - q0 * q1)],
+                     [2 * (q1 * q3 - q0 * q2), 2 * (q2 * q3 + q0 * q1), q0 * q0 - q1 * q1 - q2 * q2 + q3 * q3]])
+
+
+class AidedInsSmoother(OfflineObserver, SmootherRecord):
+    """ZUPT-aided INS with closed-loop error feedback and RTS smoothing (module docstring):
+    ``AidedInsSmoother(dt, **settings)``, ``dt`` the IMU step (s). After :meth:`run`:
+    ``epoch_times``, :meth:`error_samples`, ``filter_seconds``, ``smoother_seconds``,
+    ``strapdown_seconds``; :meth:`finish` gives them and the update counts."""
+
+    inputs: ClassVar[tuple[str, ...]] = INCREMENTS
+    measurements: ClassVar[tuple[str, ...]] = MEASUREMENTS
+    outputs: ClassVar[tuple[str, ...]] = (*NAV, *SIGMAS)
+    units: ClassVar[dict[str, str]] = {
+        **{k: "rad" for k in INCREMENTS[:3]}, **{k: "m/s" for k in INCREMENTS[3:]},
+        "stopped": "", "odometer": "m", "landmark_latitude": "rad", "landmark_longitude": "rad",
+        "landmark_height": "m",
+        "latitude": "rad", "longitude": "rad", "height": "m", "vn": "m/s", "ve": "m/s", "vd": "m/s",
+        "roll": "rad", "pitch": "rad", "heading": "rad", **{k: "m" for k in SIGMAS}}
+
+    def __init__(self, dt: float, **settings: Any) -> None:
+        super().__init__(dt, **settings)
+        self.s = s = check_settings("AidedInsSmoother", settings)
+        steps = s["filter_period"] / self.dt
+        self.epoch_steps = max(1, round(steps))
+        if abs(steps - self.epoch_steps) > 1e-6 * steps:
+            raise ValueError(f"AidedInsSmoother: filter_period {s['filter_period']!r} s is not a whole number of "
+                             f"IMU steps ({self.dt!r} s)")
+        self.model = ErrorModel(s["error_model"], ImuGrade(**{k: s[k] for k in _GRADE_NAMES}))
+        self.epoch_times = np.empty(0)
+        self.state_names = self.model.names
+        self.filter_seconds = self.smoother_seconds = self.strapdown_seconds = 0.0
+        self.counts: dict[str, int] = {}
+        self.detector: dict[str, Any] = {}
+
+    # -- the run -------------------------------------------------------------------------------
+    def _zupt_epochs(self, stopped: np.ndarray, idx: np.ndarray, times: np.ndarray) -> np.ndarray:
+        """Which epochs get a ZUPT (module docstring), from the stopped flag per sample."""
+        at = stopped[idx]
+        use = np.zeros(idx.size, dtype=bool)
+        interval = self.s["zupt_interval"]
+        if interval == 0:
+            return at
+        k = 0
+        while k < idx.size:
+            if not at[k]:
+                k += 1
+                continue
+            end = k
+            while end + 1 < idx.size and at[end + 1]:
+                end += 1
+            if math.isinf(interval):
+                use[(k + end) // 2] = True
+            else:
+                last = -math.inf
+                for j in range(k, end + 1):
+                    if times[j] - last >= interval - 1e-9:
+                        use[j] = True
+                        last = times[j]
+            k = end + 1
+        return use
+
+    def _stopped(self, t: np.ndarray, Z: np.ndarray, U: np.ndarray, mask: np.ndarray) -> np.ndarray:
+        flag = mask[:, 0] & (np.nan_to_num(Z[:, 0]) >= 0.5)
+        if self.s["zupt_source"] == "flag":
+            return flag
+        try:
+            from estimators.zupt_detector import detect_stationary, detector_scores
+        except ImportError as exc:
+            raise ValueError("AidedInsSmoother: zupt_source 'detector' needs estimators.zupt_detector "
+                             f"(detect_stationary, detector_scores), which is not available: {exc}") from None
+        detected = np.asarray(detect_stationary(U, self.dt), dtype=bool)
+        self.detector = dict(detector_scores(detected, flag))
+        return detected
+
+    def _run(self, t: np.ndarray, Z: np.ndarray, U: np.ndarray, mask: np.ndarray) -> np.ndarray:
+        s, model, dt = self.s, self.model, self.dt
+        n_samples = t.shape[0]
+        if n_samples > 1:
+            steps = np.diff(t) / dt
+            bad = np.flatnonzero(np.abs(steps - 1.0) > 1e-6)
+            if bad.size:
+                k = int(bad[0])
+                raise ValueError(f"AidedInsSmoother.run: t[{k + 1}] = {t[k + 1]!r} s is not one IMU step "
+                                 f"({dt!r} s) after t[{k}] = {t[k]!r} s (the record must be uniform)")
+        if not np.isfinite(U).all():
+            k = int(np.flatnonzero(~np.isfinite(U).all(axis=1))[0])
+            raise ValueError(f"AidedInsSmoother.run: increments at t = {t[k]!r} s are not finite")
+        m = self.epoch_steps
+        idx = np.arange(0, n_samples, m)
+        if idx[-1] != n_samples - 1:
+            idx = np.append(idx, n_samples - 1)
+        N, n = idx.size, model.n
+        self.epoch_times = t[idx]
+        stopped = self._stopped(t, Z, U, mask)
+        zupt = self._zupt_epochs(stopped, idx, self.epoch_times) if s["zupt"] else np.zeros(N, dtype=bool)
+
+        shapes = {"Pm": (N, n, n), "Pp": (N, n, n), "Phi": (max(N - 1, 0), n, n), "Q": (max(N - 1, 0), n, n),
+                  "C": (max(N - 1, 0), n, n), "Ps": (N, n, n), "a": (N, n), "d": (N, n), "s": (N, n),
+                  "c": (N, n), "nav": (n_samples, 9)}
+        store = _Store(shapes, s["memory_budget_mb"] * 1e6)
+        self._init_record(store, model.names)
+        self.spilled = store.spilled
+        t_start = time.perf_counter()
+        strap = self._forward(t, Z, U, mask, idx, zupt, store)
+        t_mid = time.perf_counter()
+        _smooth(store)
+        out = self._smoothed_navigation(idx, store)
+        t_end = time.perf_counter()
+        self.strapdown_seconds = strap
+        self.filter_seconds = t_mid - t_start - strap
+        self.smoother_seconds = t_end - t_mid
+        return out
+
+    def _initial_ins(self, u0: np.ndarray) -> Strapdown:
+        s = self.s
+        C = perturb(dcm_from_rph(s["roll"], s["pitch"], s["heading"]),
+                    [s["tilt_error_north"], s["tilt_error_east"], s["heading_error"]])
+        v = (s["vn"] + s["velocity_error_north"], s["ve"] + s["velocity_error_east"],
+             s["vd"] + s["velocity_error_down"])
+        ins = Strapdown.from_rph(s["latitude"], s["longitude"], s["height"], v, rph_from_dcm(C), self.dt)
+        ins.prime(u0[:3], u0[3:])
+        return ins
+
+    def _forward(self, t, Z, U, mask, idx, zupt, store) -> float:
+        """The forward filter with feedback (module docstring); returns the seconds spent in
+        the strapdown. The epochs go in blocks of :data:`BLOCK`: the INS integrates a block in
+        one call, ``Phi``, ``Q`` and the measurement rows of its epochs are formed at once, the
+        covariance recursion and the updates loop over its epochs, and the navigation part of
+        the estimate is fed back at the block's end (open loop within one block: 1 s at the
+        default epoch, where the linearisation error is ~|dx|^2, < 1e-9 of the error)."""
+        s, model, dt = self.s, self.model, self.dt
+        n, N, n_samples = model.n, idx.size, t.shape[0]
+        Pm, Pp, Phi_s, Q_s, a_s, d_s, c_s, nav = (store[k] for k in ("Pm", "Pp", "Phi", "Q", "a", "d", "c", "nav"))
+        ins = self._initial_ins(U[0])
+        strap = 0.0
+        H_v, H_r = model.velocity_rows(), model.position_rows()
+        R_v = s["zupt_sigma"] ** 2 * np.eye(3)
+        R_r = s["landmark_sigma"] ** 2 * np.eye(3)
+        R_nhc = s["nhc_sigma"] ** 2 * np.eye(2)
+        R_odo = np.array([[s["odometer_sigma"] ** 2]])
+        fix_at = np.full(N, -1)  # the sample of the landmark fix an epoch uses
+        if s["landmarks"]:
+            present = mask[:, 2:5].all(axis=1)
+            new = present.copy()
+            new[1:] &= ~(present[:-1] & np.all(Z[1:, 2:5] == Z[:-1, 2:5], axis=1))  # a held fix is one fix
+            for j in np.flatnonzero(new):
+                fix_at[np.searchsorted(idx, j, side="left")] = j  # the last fix of a chunk wins
+        odo_ok = np.zeros(N, dtype=bool)
+        if s["odometer"]:
+            odo_ok[1:] = mask[idx[1:], 1] & mask[idx[:-1], 1]
+        counts = {"zupt_updates": 0, "nhc_updates": 0, "odometer_updates": 0, "landmark_updates": 0}
+        nav[0] = ins.navigation()
+        x = np.zeros(n)  # the filter's estimate relative to the fed-back INS
+        P = model.initial_covariance(s["tilt_sigma"], s["heading_sigma"], s["velocity_sigma"], s["position_sigma"])
+        feedback, nhc, odometer = s["feedback"], s["nhc"], s["odometer"]
+        zero = np.zeros(n)
+        k0 = -1  # the last epoch done
+        while k0 < N - 1:
+            k1 = min(k0 + BLOCK, N - 1) if k0 >= 0 else 0
+            lat0, lon0, h0, v0 = ins.lat, ins.lon, ins.h, (ins.vn, ins.ve, ins.vd)
+            C0 = _dcm(tuple(ins.quaternion()))
+            if k0 < 0:  # epoch 0: the initial state, no prediction
+                rows = nav[:1].copy()
+                C = C0[None]
+                Phi = Qd = None
+                first = 0
+            else:
+                i0, i1 = int(idx[k0]), int(idx[k1])
+                ts = time.perf_counter()
+                nav[i0 + 1:i1 + 1] = ins.integrate(U[i0 + 1:i1 + 1])
+                strap += time.perf_counter() - ts
+                rows = np.asarray(nav[idx[k0 + 1:k1 + 1]])
+                C = dcm_from_rph(rows[:, 6], rows[:, 7], rows[:, 8]).reshape(-1, 3, 3)
+                C[-1] = _dcm(tuple(ins.quaternion()))
+                lat = np.concatenate(([lat0], rows[:, 0]))
+                hh = np.concatenate(([h0], rows[:, 2]))
+                v = np.vstack((v0, rows[:, 3:6]))
+                T = np.diff(idx[k0:k1 + 1]) * dt
+                lat_m, h_m, v_m = 0.5 * (lat[1:] + lat[:-1]), 0.5 * (hh[1:] + hh[:-1]), 0.5 * (v[1:] + v[:-1])
+                w2 = 2.0 * earth.earth_rate_n(lat_m) + earth.transport_rate_n(lat_m, h_m, v_m)
+                f_n = np.diff(v, axis=0) / T[:, None] + np.cross(w2, v_m)
+                f_n[:, 2] -= earth.gravity(lat_m, h_m)
+                C_m = 0.5 * (C + np.concatenate((C0[None], C[:-1])))
+                Phi, Qd = model.discretize(model.system_matrices(lat_m, h_m, v_m, f_n, C_m), T)
+                Phi_s[k0:k1], Q_s[k0:k1] = Phi, Qd
+                first = k0 + 1
+                if odometer:  # the INS's mean body-x speed over each epoch
+                    pos = np.vstack(((lat0, lon0, h0), rows[:, :3]))
+                    dr = ned_difference(pos[1:, 0], pos[1:, 1], pos[1:, 2], pos[:-1, 0], pos[:-1, 1], pos[:-1, 2])
+                    v_ins = np.einsum("ki,ki->k", C_m[:, :, 0], dr) / T
+                    v_odo = (Z[idx[first:k1 + 1], 1] - Z[idx[k0:k1], 1]) / T
+            vel = rows[:, 3:6]
+            if nhc or odometer:
+                Hb = np.zeros((vel.shape[0], 3, n))
+                CT = C.transpose(0, 2, 1)
+                Hb[:, :, PHI] = -CT @ skews(vel)
+                Hb[:, :, DV] = CT
+                vb = np.einsum("kji,kj->ki", C, vel)
+            for j, k in enumerate(range(first, k1 + 1)):
+                if Phi is not None:
+                    b = Phi[j] @ x
+                    P = Phi[j] @ P @ Phi[j].T + Qd[j]
+                    P = 0.5 * (P + P.T)
+                else:
+                    b = x
+                Pm[k] = P
+                Hs, zs, Rs = [], [], []
+                if zupt[k]:
+                    Hs.append(H_v)
+                    zs.append(vel[j])
+                    Rs.append(R_v)
+                    counts["zupt_updates"] += 1
+                elif k > 0:
+                    if nhc:
+                        Hs.append(Hb[j, 1:])
+                        zs.append(vb[j, 1:])
+                        Rs.append(R_nhc)
+                        counts["nhc_updates"] += 1
+                    if odometer and odo_ok[k]:
+                        Hs.append(Hb[j, :1])
+                        zs.append(np.array([v_ins[j] - v_odo[j]]))
+                        Rs.append(R_odo)
+                        counts["odometer_updates"] += 1
+                if fix_at[k] >= 0:
+                    i = int(fix_at[k])
+                    zs.append(ned_difference(nav[i, 0], nav[i, 1], nav[i, 2], Z[i, 2], Z[i, 3], Z[i, 4]))
+                    Hs.append(H_r)
+                    Rs.append(R_r)
+                    counts["landmark_updates"] += 1
+                if Hs:
+                    if len(Hs) == 1:
+                        H, z, R = Hs[0], zs[0], Rs[0]
+                    else:
+                        H, z = np.vstack(Hs), np.concatenate(zs)
+                        R = np.zeros((z.size, z.size))
+                        o = 0
+                        for Ri in Rs:
+                            R[o:o + Ri.shape[0], o:o + Ri.shape[0]] = Ri
+                            o += Ri.shape[0]
+                    upd = kalman.update(b, P, z, H, R)
+                    x, P = upd.x, upd.P
+                else:
+                    x = b
+                Pp[k] = P
+                if k == k1 and feedback and np.any(x[:9]):
+                    c = np.zeros(n)
+                    c[:9] = x[:9]
+                    self._feed_back(ins, c)
+                    a_s[k], d_s[k], c_s[k] = x - c, c - b, c
+                    x = x - c
+                else:
+                    a_s[k], d_s[k], c_s[k] = x, -b, zero
+            k0 = k1
+        self.counts = counts
+        return strap
+
+    @staticmethod
+    def _feed_back(ins: Strapdown, c: np.ndarray) -> None:
+        """Correct the INS by the navigation error estimate ``c`` (phi, dv, dr)."""
+        lat, lon, h = corrected_position(ins.lat, ins.lon, ins.h, c[DR])
+        dq = _quat_rotvec(*c[PHI].tolist())
+        q = _quat_mul(dq, tuple(ins.quaternion()))
+        ins.set_state(lat=float(lat), lon=float(lon), height=float(h),
+                      v_ned=(ins.vn - c[3], ins.ve - c[4], ins.vd - c[5]), q=q)
+
+    def _smoothed_navigation(self, idx: np.ndarray, store: _Store) -> np.ndarray:
+        """The INS's samples corrected by the smoothed error, interpolated between epochs
+        (module docstring), and the smoothed position sigmas."""
+        nav = store["nav"]
+        n_samples = nav.shape[0]
+        s_ep, c_ep, Ps = store["s"], store["c"], store["Ps"]
+        out = np.empty((n_samples, len(self.outputs)))
+        N = idx.size
+        var = np.einsum("kii->ki", np.asarray(Ps[:, DR, DR]))
+        for lo in range(0, n_samples, 1 << 16):  # bounded temporaries on long runs
+            hi = min(n_samples, lo + (1 << 16))
+            j = np.arange(lo, hi)
+            k = np.clip(np.searchsorted(idx, j, side="left"), 1, max(N - 1, 1)) if N > 1 else np.zeros(hi - lo, int)
+            if N > 1:
+                i0, i1 = idx[k - 1], idx[k]
+                w = ((j - i0) / (i1 - i0))[:, None]
+                start = np.asarray(s_ep[k - 1])
+                end = np.asarray(s_ep[k]) + np.asarray(c_ep[k])
+                # sample 0 is the INS's initial state, before the feedback of epoch 0
+                at0 = j == 0
+                corr = (1.0 - w) * start + w * end
+                corr[at0] = np.asarray(s_ep[0]) + np.asarray(c_ep[0])
+                v = (1.0 - w) * var[k - 1] + w * var[k]
+            else:
+                corr = np.repeat((np.asarray(s_ep[0]) + np.asarray(c_ep[0]))[None], hi - lo, axis=0)
+                v = np.repeat(var[:1], hi - lo, axis=0)
+            block = np.asarray(nav[lo:hi])
+            lat, lon, h = corrected_position(block[:, 0], block[:, 1], block[:, 2], corr[:, DR])
+            out[lo:hi, 0], out[lo:hi, 1], out[lo:hi, 2] = lat, lon, h
+            out[lo:hi, 3:6] = block[:, 3:6] - corr[:, DV]
+            R = Rotation.from_rotvec(corr[:, PHI]) * Rotation.from_euler("ZYX", block[:, [8, 7, 6]])
+            out[lo:hi, 6:9] = R.as_euler("ZYX")[:, ::-1]
+            out[lo:hi, 9:12] = np.sqrt(np.clip(v, 0.0, None))
+        return out
+
+    def finish(self) -> dict:
+        out = {"filter_seconds": self.filter_seconds, "smoother_seconds": self.smoother_seconds,
+               "strapdown_seconds": self.strapdown_seconds, "epochs": int(self.epoch_times.size), **self.counts}
+        if self.detector:
+            out.update({f"zupt_detector_{k}": v for k, v in self.detector.items()})
+        return out
+
+
+class CovarianceAnalysis(SmootherRecord):
+    """Result of :func:`covariance_analysis`: ``epoch_times``, ``P_filter``, ``P_smoothed``,
+    :meth:`error_samples`, :meth:`joint_covariance`."""
+
+    def __init__(self, epoch_times: np.ndarray, store: _Store, names: tuple[str, ...]) -> None:
+        self.epoch_times = epoch_times
+        self._init_record(store, names)
+
+
+def covariance_analysis(times, f_n, C_bn, latitude, velocity, zupt, position=None, height=0.0,
+                        **settings: Any) -> CovarianceAnalysis:
+    r"""The filter's and the smoother's covariance recursions on a given nominal trajectory,
+    without data (Jiang et al. (2017), §5): epoch ``times`` ``(N,)`` (s), per epoch the
+    specific force ``f_n`` ``(N, 3)`` (NED, m/s2; the value over the interval that ends at the
+    epoch), attitude ``C_bn`` ``(N, 3, 3)``, ``latitude`` (rad, scalar or ``(N,)``),
+    ``velocity`` ``(N, 3)`` (NED, m/s), ``zupt`` ``(N,)`` bool (zero-velocity update at the epoch),
+    ``position`` ``(N,)`` bool or None (landmark position update), ``height`` (m). ``settings``:
+    those of :class:`AidedInsSmoother` that concern the covariances (the grade, the P0 sigmas,
+    ``error_model``, ``zupt_sigma``, ``landmark_sigma``, ``memory_budget_mb``). Returns a
+    :class:`CovarianceAnalysis`."""
+    s = check_settings("covariance_analysis", settings)
+    times = np.asarray(times, dtype=float)
+    N = times.shape[0]
+    if times.ndim != 1 or N < 1 or np.any(np.diff(times) <= 0):
+        raise ValueError("covariance_analysis: times must be a non-empty increasing 1-D array")
+    f_n = np.broadcast_to(np.asarray(f_n, dtype=float), (N, 3))
+    C_bn = np.broadcast_to(np.asarray(C_bn, dtype=float), (N, 3, 3))
+    lat = np.broadcast_to(np.asarray(latitude, dtype=float), (N,))
+    hgt = np.broadcast_to(np.asarray(height, dtype=float), (N,))
+    vel = np.broadcast_to(np.asarray(velocity, dtype=float), (N, 3))
+    zupt = np.broadcast_to(np.asarray(zupt, dtype=bool), (N,))
+    pos = np.zeros(N, dtype=bool) if position is None else np.broadcast_to(np.asarray(position, dtype=bool), (N,))
+    model = ErrorModel(s["error_model"], ImuGrade(**{k: s[k] for k in _GRADE_NAMES}))
+    n = model.n
+    shapes = {"Pm": (N, n, n), "Pp": (N, n, n), "Phi": (max(N - 1, 0), n, n), "Q": (max(N - 1, 0), n, n),
+              "C": (max(N - 1, 0), n, n), "Ps": (N, n, n), "a": (N, n), "d": (N, n), "s": (N, n)}
+    store = _Store(shapes, s["memory_budget_mb"] * 1e6)
+    P = model.initial_covariance(s["tilt_sigma"], s["heading_sigma"], s["velocity_sigma"], s["position_sigma"])
+    H_v, H_r = model.velocity_rows(), model.position_rows()
+    R_v, R_r = s["zupt_sigma"] ** 2 * np.eye(3), s["landmark_sigma"] ** 2 * np.eye(3)
+    zero = np.zeros(n)
+    for k in range(N):
+        if k:
+            A = model.system_matrix(lat[k], hgt[k], vel[k], f_n[k], C_bn[k])
+            Phi, Qd = model.discretize(A, times[k] - times[k - 1])
+            store["Phi"][k - 1], store["Q"][k - 1] = Phi, Qd
+            P = kalman.predict_covariance(P, Phi, Qd)
+        store["Pm"][k] = P
+        Hs = [H for H, use in ((H_v, zupt[k]), (H_r, pos[k])) if use]
+        if Hs:
+            Rs = [R for R, use in ((R_v, zupt[k]), (R_r, pos[k])) if use]
+            R = np.zeros((3 * len(Rs), 3 * len(Rs)))
+            for i, Ri in enumerate(Rs):
+                R[3 * i:3 * i + 3, 3 * i:3 * i + 3] = Ri
+            H = np.vstack(Hs)
+            P = kalman.update(zero, P, np.zeros(H.shape[0]), H, R).P
+        store["Pp"][k] = P
+    _smooth(store)
+    return CovarianceAnalysis(times, store, model.names)
