@@ -155,6 +155,8 @@ def run_study(name: str, out: Path | str | None = None, scheduler: str | None = 
             member_runs = {s: results[v, s] for s in seeds}
             table[v] = {"runs": member_runs, "summary": summarise(member_runs)}
         md.append(exp.study.summary_md({v: t["summary"] for v, t in table.items()}, runs))
+        extra = exp.study.study_tables(table, series)
+        md += ["", extra] if extra else []
         plots = exp.study.study_figures(table, series, out)
         md += ["", *[f"![{p}]({p})" for p in plots], ""] if plots else []
         md += ["", "Each run's files are in <variant>/seed_<seed>/." if keep_runs else

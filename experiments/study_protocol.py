@@ -166,6 +166,11 @@ class Study:
         :meth:`series` as ``{variant: {seed: arrays}}``. Default: none."""
         return []
 
+    def study_tables(self, table: dict, series: dict[str, dict[int, dict[str, np.ndarray]]]) -> str:
+        """Markdown the Monte Carlo's table.md adds after the summary, from the members'
+        metrics and :meth:`series` (e.g. differences between runs). Default: none."""
+        return ""
+
     def report_md(self, metrics: dict) -> str:
         """The study's section of report.md (default: each observer's raw error)."""
         return observers_md(metrics)
