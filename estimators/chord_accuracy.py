@@ -29,10 +29,11 @@ To first order ``Delta_s = J_s [e_s, e_{s+o}, e_a, e_b]``; for a straight chord 
 this is eqs. 21-22, ``Delta_y = e_E(s) - e_E(s + o) + (o / l) (e_E(b) - e_E(a))``.
 :func:`chord_error_jacobian` gives ``J`` (central differences of the exact map; the map is
 smooth, so they are exact to ~1e-9 relative), the map a covariance goes through. It leaves
-out terms of second order in the errors: the chord turns by ``~|e_b - e_a| / l`` and a point
-moves along it by its along-track error, so the neglected part is about
-``|e_s - e_{s+o}| |e_b - e_a| / l``: 1e-8 m for millimetre relative errors, ~1e-5 m for
-the 10 cm errors of an unaided INS (measured in ``tests/test_chord_accuracy.py``).
+out terms of second order in the errors (the chord turns by ``~|e_b - e_a| / l`` while
+points move along it by their along-track errors): for smooth errors whose chord errors
+are ~1 mm it is off by ~1e-4 of them (0.1 um), growing in proportion to the errors (1.4 %
+at 9 cm; measured in ``tests/test_chord_accuracy.py``). A constant error and a turn of the
+whole survey about the vertical give no chord error, exactly.
 
 Prediction of the paper's statistic
 -----------------------------------
@@ -40,13 +41,32 @@ The paper's figure of merit (Fig. 12) is, per run, the maximum ``|Delta|`` over 
 chord points, and over runs its RMS. From ``S`` samples of the smoother's joint Gaussian of
 the position errors at the grid samples (``AidedInsSmoother.error_samples``, or
 ``covariance_analysis(...).error_samples``) :func:`predict_chord_sigma` returns
-``sqrt(mean_S max_s Delta^2)`` for alignment and level, the pointwise RMS of ``Delta`` along
+``sqrt(mean_S max_s Delta^2)`` (max over all surveyed points) for alignment and level, the
+pointwise RMS of ``Delta`` along
 the track (for the plots), and the relative standard error of the prediction (delta method:
-``se(RMS) / RMS = std(M^2) / (2 sqrt(S) mean(M^2))``, ``M`` the per-sample maximum). For the
-paper's 30 m run ``std(M^2) / mean(M^2)`` is about 1.3 (alignment) and 1.4 (level) (measured
-in the tests: the maximum of a 51-point chord error is nearly a 2-D Gaussian's norm), so
-``S`` = 1000 (:data:`DEFAULT_SAMPLES`) gives 2 % (the Monte Carlo of 500 runs it is compared
-with has 3 %); the chord part costs ~2 ms for a 30 m run and ~20 ms for 600 m.
+``se(RMS) / RMS = std(M^2) / (2 sqrt(S) mean(M^2))``, ``M`` the per-sample maximum).
+Measured ``std(M^2) / mean(M^2)``: 0.78 (alignment) and 0.75 (level) on the paper's nominal
+run with its sensor noise (:func:`nominal_chord_accuracy`), 1.16 and 1.40 in the noise-free
+simplified case of eqs. 29-31 (there the level error is one Gaussian times a shape, ``M^2 ~
+chi^2_1``: ``sqrt 2``). So ``S`` samples give ~``0.39 / sqrt(S)``: 3.2 % at ``S = 150``
+(:data:`DEFAULT_SAMPLES`), 1.2 % at 1000; a 500-run Monte Carlo's own RMS has ~1.7 %. Cost
+on the 30 m run (600 KF epochs, this 2-core machine): the smoother's backward sampling
+~0.17 ms per sample (25 ms for 150), the chord errors ~0.006 ms per sample.
+:func:`chord_sigma_from_covariance` gives the pointwise sigma exactly from a joint
+covariance instead (``SmootherRecord.joint_covariance`` at the grid epochs).
+
+Sensitivity (Figs. 8-11)
+------------------------
+:func:`sensitivity_curves` runs ``estimators.aided_ins.covariance_analysis`` on
+:func:`nominal_run` (the paper's § 6.1 survey: straight, level, N45E, 30 m at 1 m/s, velocity
+updates at both ends, navigation grade, 0.006 / 0.06 deg) varying one setting at a time.
+At the nominal point the largest pointwise sigma on the chord is 0.98 mm (alignment) and
+0.91 mm (level), and the predicted RMS over runs of the max is 1.5 mm and 1.4 mm (the paper
+reports 0.99 and 0.70 mm from its Monte Carlo); the accelerometer noise (10 ug/sqrt(Hz))
+makes most of both. As the paper remarks, the level does not depend on the attitude errors,
+the gyro noise or the gyro biases (to < 1e-3), the alignment not on the accelerometer bias,
+position updates at the ends change neither by more than 0.3 %, and both grow with the
+velocity update's sigma (1 mm of alignment at ~0.13 mm/s; the paper's Fig. 8: 0.15 mm/s).
 
 Closed forms (eqs. 29-31)
 -------------------------
@@ -77,10 +97,23 @@ with the posterior of ``(phi_N, eps_N)`` after the update (``w = 1 / sigma_r^2``
 12-state system (``expm``, a Kalman update, the RTS smoother's covariances and
 cross-covariances between ``0, t_s, t_s + k T, T``) in the tests. **Errata / reading
 notes**: the paper writes these for its chord only, ``k = 1/6``, having put ``T = 6 k T``
-(its ``5 k T`` is ``(1 - k) T``, its ``35 k^2 T^2`` is ``(1 - k^2) T^2 = 35 k^2 T^2``); here
-``k`` is free and at ``k = 1/6`` the expressions equal the printed eqs. 29 and 31 term by
-term. Eq. 30's denominator is ``4 (sigma_v^2 + 18 k^2 p_nabla T^2)`` (the PDF's text reads
-like ``4 sigma_v^2 + 18 k^2 p_nabla T^2``, which is wrong by up to a factor 4).
+(its ``5 k T`` stands for ``(1 - k) T``, its ``35 k^2 T^2`` for ``(1 - k^2) T^2``, and so on):
+they are wrong for any other ``k``. Here ``k`` is free; at ``k = 1/6`` the values equal the
+printed eqs. 29 and 31 to 1e-12 (no typo found in them). Eq. 30's denominator is
+``4 (sigma_v^2 + 18 k^2 p_nabla T^2)``: the extracted text reads like
+``4 sigma_v^2 + 18 k^2 p_nabla T^2``, which is wrong by up to a factor 4.
+
+Use in a study
+--------------
+With the record's true ``distance``, ``north, east, down`` and the smoothed position
+errors ``err`` (local NED, m; e.g. ``estimators.ins_error_model.ned_difference`` of the
+smoothed and the true latitude, longitude, height) and the smoother ``obs``::
+
+    grid = chord_grid(distance)
+    r = truth_ned[grid.sample]
+    metrics = chord_error_statistics(*chord_errors(grid, r, err[grid.sample]))
+    pred = predict_chord_sigma(grid, r, obs.error_samples(time[grid.sample], DEFAULT_SAMPLES, seed))
+    metrics.update(pred.metrics())      # predicted_sigma_alignment_mm, predicted_sigma_level_mm
 """
 
 from __future__ import annotations
@@ -92,8 +125,8 @@ import numpy as np
 
 from models.track_geometry import vector_distance
 
-#: samples of the joint Gaussian per prediction: ~2 % relative standard error (module doc)
-DEFAULT_SAMPLES = 1000
+#: samples of the joint Gaussian per prediction: ~3 % relative standard error, ~25 ms (module doc)
+DEFAULT_SAMPLES = 150
 MM = 1e3
 
 
@@ -131,7 +164,8 @@ def chord_grid(distance, ds: float = 0.5, chord_length: float = 30.0, offset: fl
     Grid distances are the multiples of ``ds`` in ``[distance[0], distance[-1]]`` (a grid
     point the run does not reach is left out); each takes the nearest record sample, the
     first of a stop (so a stop does not duplicate points). A chord ``[j l, (j + 1) l]`` is
-    surveyed when both its ends are on the grid."""
+    surveyed when both its ends are on the grid (a run shorter than a chord has none: its
+    statistics are NaN)."""
     dist = np.asarray(distance, dtype=float)
     if dist.ndim != 1 or dist.size < 2 or not np.all(np.isfinite(dist)):
         raise ValueError("distance must be a finite 1-D array of at least two samples")
@@ -237,8 +271,10 @@ def linear_chord_errors(grid: ChordGrid, jacobian, position_errors) -> tuple[np.
 def chord_error_statistics(alignment, level) -> dict:
     """The paper's per-run statistic and the rms (mm): max |error| over all surveyed chord
     points and the rms over them, under the study's metric names. Leading axes (runs or
-    samples) are kept: the values are then arrays."""
+    samples) are kept: the values are then arrays. A run that surveys no whole chord gets NaN."""
     a, v = np.abs(np.asarray(alignment)), np.abs(np.asarray(level))
+    if a.shape[-1] == 0:
+        a = v = np.full(a.shape[:-1] + (1,), np.nan)
     out = {"chord_alignment_max_error_mm": MM * a.max(axis=-1),
            "chord_level_max_error_mm": MM * v.max(axis=-1),
            "chord_alignment_rms_error_mm": MM * np.sqrt(np.mean(a * a, axis=-1)),
@@ -274,6 +310,8 @@ class ChordPrediction:
 
 
 def _rms_and_se(m: np.ndarray) -> tuple[float, float]:
+    if m.size == 0:
+        return math.nan, math.nan
     m2 = m * m
     mean = float(m2.mean())
     se = float(m2.std(ddof=1)) / (2.0 * math.sqrt(m2.size) * mean) if m2.size > 1 and mean > 0 else math.inf
@@ -289,8 +327,9 @@ def predict_chord_sigma(grid: ChordGrid, true_positions, error_samples) -> Chord
     if e.ndim != 3:
         raise ValueError(f"error samples must be (S, n_grid, 3), got {e.shape}")
     a, v = chord_errors(grid, true_positions, e)
-    sa, ra = _rms_and_se(np.abs(a).max(axis=-1))
-    sv, rv = _rms_and_se(np.abs(v).max(axis=-1))
+    none = np.zeros(0)  # no whole chord surveyed: nothing to predict (NaN)
+    sa, ra = _rms_and_se(np.abs(a).max(axis=-1) if grid.n_points else none)
+    sv, rv = _rms_and_se(np.abs(v).max(axis=-1) if grid.n_points else none)
     return ChordPrediction(MM * sa, MM * sv, ra, rv, MM * np.sqrt(np.mean(a * a, axis=0)),
                            MM * np.sqrt(np.mean(v * v, axis=0)), grid.s.copy(), e.shape[0])
 
@@ -317,7 +356,8 @@ def alignment_variance(t_s, k: float, T: float, g: float, p_phi: float, p_eps: f
     D = (576 * sv2 + 288 * T2 * g2 * p_phi + 72 * T2 ** 2 * g2 * p_eps
          + w * (144 * T2 * sv2 ** 2 + 72 * T2 ** 2 * g2 * p_phi * sv2 + 20 * T2 ** 3 * g2 * p_eps * sv2
                 + T2 ** 4 * g2 * g2 * p_phi * p_eps))
-    P_ff = 4 * p_phi * (144 * sv2 + 18 * T2 ** 2 * g2 * p_eps + w * (36 * T2 * sv2 ** 2 + 5 * T2 ** 3 * g2 * p_eps * sv2)) / D
+    P_ff = 4 * p_phi * (144 * sv2 + 18 * T2 ** 2 * g2 * p_eps
+                        + w * (36 * T2 * sv2 ** 2 + 5 * T2 ** 3 * g2 * p_eps * sv2)) / D
     P_fe = 36 * T2 * T * g2 * p_phi * p_eps * (4 + w * T2 * sv2) / D
     P_ee = 72 * p_eps * (4 + w * T2 * sv2) * (T2 * g2 * p_phi + 2 * sv2) / D
     q2, q3 = _q2_q3(t_s, k, T)
@@ -338,3 +378,147 @@ def closed_form_sigma(t_s, k: float, T: float, g: float, p_phi: float, p_eps: fl
     """Eqs. 29-31 as sigmas (m): (alignment, level) at ``t_s``."""
     return (np.sqrt(alignment_variance(t_s, k, T, g, p_phi, p_eps, sigma_v, sigma_r)),
             np.sqrt(level_variance(t_s, k, T, p_nabla_D, sigma_v)))
+
+
+# ---- exact pointwise sigma from a joint covariance ----------------------------------------------
+
+def chord_sigma_from_covariance(grid: ChordGrid, true_positions, position_covariance) -> tuple[np.ndarray, np.ndarray]:
+    """Pointwise sigma (m) of the chord errors (alignment, level), shape (n_points,), from the
+    joint covariance of the position errors at the grid samples, ``(3 n_grid, 3 n_grid)``
+    (sample-major: N, E, D of sample 0, then of sample 1, ...), through the linear map of
+    :func:`chord_error_jacobian` (exact to ~1e-4 for millimetre errors, module doc)."""
+    J = chord_error_jacobian(grid, true_positions)  # (2, n, 4, 3)
+    C = np.asarray(position_covariance, dtype=float)
+    m = grid.distance.size
+    if C.shape != (3 * m, 3 * m):
+        raise ValueError(f"position covariance must be ({3 * m}, {3 * m}), got {C.shape}")
+    C4 = C.reshape(m, 3, m, 3)
+    idx = grid.index  # (4, n)
+    # blocks Cov(e_u, e_v) of each point's four samples: (n, 4, 3, 4, 3)
+    B = C4[idx.T[:, :, None, None, None], np.arange(3)[None, None, :, None, None],
+           idx.T[:, None, None, :, None], np.arange(3)[None, None, None, None, :]]
+    var = np.einsum("cnui,nuivj,cnvj->cn", J, B, J)
+    return np.sqrt(np.clip(var[0], 0.0, None)), np.sqrt(np.clip(var[1], 0.0, None))
+
+
+# ---- sensitivity curves (Figs. 8-11) on the paper's nominal run ---------------------------------
+
+DEG = math.pi / 180.0
+#: the paper's nominal (§ 5 and § 6.1): the settings of ``covariance_analysis`` that the curves vary
+NOMINAL = {"zupt_sigma": 1e-4, "velocity_sigma": 1e-4, "position_sigma": 0.1, "landmark_sigma": 0.1,
+           "tilt_sigma": 0.006 * DEG, "heading_sigma": 0.06 * DEG,
+           "gyro_arw_deg_sqrt_h": 0.005, "gyro_bias_instability_deg_h": 0.01,
+           "accel_noise_ug_sqrt_hz": 10.0, "accel_bias_instability_ug": 50.0}
+#: x axes of the curves: (setting, values in the unit shown, unit, factor to the setting's unit)
+SENSITIVITY_AXES = {
+    "zupt_sigma": (np.geomspace(0.01, 1.0, 9), "mm/s", 1e-3),  # Fig. 8 (with and without positions)
+    "gyro_arw_deg_sqrt_h": (np.geomspace(0.001, 0.02, 7), "deg/sqrt(h)", 1.0),  # Fig. 9
+    "accel_noise_ug_sqrt_hz": (np.geomspace(1.0, 50.0, 7), "ug/sqrt(Hz)", 1.0),  # Fig. 9
+    "tilt_sigma": (np.geomspace(0.001, 0.03, 7), "deg", DEG),  # Fig. 10
+    "heading_sigma": (np.geomspace(0.01, 0.3, 7), "deg", DEG),  # Fig. 10
+    "gyro_bias_instability_deg_h": (np.geomspace(0.001, 0.1, 7), "deg/h", 1.0),  # Fig. 11
+    "accel_bias_instability_ug": (np.geomspace(5.0, 500.0, 7), "ug", 1.0),  # Fig. 11
+}
+
+
+@dataclass
+class NominalRun:
+    """A straight level run at constant speed (the paper's § 5 idealisation: the stops at the
+    ends are velocity updates, the accelerations are left out): KF epochs ``times`` (s), their
+    ``f_n``, ``C_bn``, ``velocity``, the update flags, and the chord ``grid`` with the true
+    positions at its samples (n0 NED, m) and their epochs ``grid_epochs``."""
+
+    times: np.ndarray
+    f_n: np.ndarray
+    C_bn: np.ndarray
+    velocity: np.ndarray
+    latitude: float
+    zupt: np.ndarray
+    position: np.ndarray
+    grid: ChordGrid
+    true_positions: np.ndarray
+    grid_epochs: np.ndarray
+
+
+def nominal_run(length: float = 30.0, speed: float = 1.0, azimuth: float = 45.0 * DEG,
+                latitude: float = 30.5 * DEG, filter_period: float = 0.05,
+                position_updates: bool = False) -> NominalRun:
+    """The paper's simulated survey (§ 6.1): straight, level, N45E, 30 m at 1 m/s, velocity
+    (ZUPT) updates at the first and last epochs, landmark position updates there too when
+    ``position_updates``."""
+    from models import earth
+
+    n = int(round(length / speed / filter_period))
+    times = np.arange(n + 1) * filter_period
+    dist = speed * times
+    u = np.array([math.cos(azimuth), math.sin(azimuth), 0.0])
+    ca, sa = math.cos(azimuth), math.sin(azimuth)
+    C = np.array([[ca, -sa, 0.0], [sa, ca, 0.0], [0.0, 0.0, 1.0]])  # body x along the track
+    f_n = np.tile([0.0, 0.0, -earth.gravity(latitude, 0.0)], (n + 1, 1))
+    ends = np.zeros(n + 1, dtype=bool)
+    ends[[0, -1]] = True
+    grid = chord_grid(dist)
+    return NominalRun(times, f_n, np.broadcast_to(C, (n + 1, 3, 3)), np.tile(speed * u, (n + 1, 1)), latitude,
+                      ends, ends.copy() if position_updates else np.zeros(n + 1, dtype=bool), grid,
+                      np.outer(grid.distance, u), grid.sample)
+
+
+def nominal_chord_accuracy(run: NominalRun, n_samples: int = 0, seed: int = 1, **settings) -> dict:
+    """``covariance_analysis`` of ``run`` with ``settings`` (those of ``AidedInsSmoother``):
+    the chord accuracy in mm: ``alignment_mm``, ``level_mm`` the largest pointwise sigma over
+    the surveyed points (exact, from the smoother's joint covariance), ``pointwise_*_mm``, and
+    with ``n_samples`` > 0 the predicted RMS over runs of the max ``|error|``
+    (``max_rms_alignment_mm``, ``max_rms_level_mm``; :func:`predict_chord_sigma`)."""
+    from estimators.aided_ins import covariance_analysis
+
+    ca = covariance_analysis(run.times, run.f_n, run.C_bn, run.latitude, run.velocity, run.zupt,
+                             position=run.position, **settings)
+    dr = slice(6, 9)
+    n = len(ca.state_names)
+    full = ca.joint_covariance(run.grid_epochs)
+    m = run.grid_epochs.size
+    cov = full.reshape(m, n, m, n)[:, dr, :, dr].reshape(3 * m, 3 * m)
+    sy, sz = chord_sigma_from_covariance(run.grid, run.true_positions, cov)
+    out = {"alignment_mm": MM * float(sy.max()), "level_mm": MM * float(sz.max()),
+           "pointwise_alignment_mm": MM * sy, "pointwise_level_mm": MM * sz}
+    if n_samples:
+        p = predict_chord_sigma(run.grid, run.true_positions,
+                                ca.error_samples(run.times[run.grid_epochs], n_samples, seed))
+        out.update(max_rms_alignment_mm=p.sigma_alignment_mm, max_rms_level_mm=p.sigma_level_mm)
+    return out
+
+
+def sensitivity_curves(axes=None, n_samples: int = 0, seed: int = 1, **nominal) -> dict:
+    """Predicted chord accuracy against one setting at a time, the others at the paper's
+    nominal (:data:`NOMINAL`, overridden by ``nominal``), on :func:`nominal_run`, like
+    Jiang et al. (2017) Figs. 8-11. ``axes``: names from :data:`SENSITIVITY_AXES` (default
+    all) or a dict ``{setting: (values, unit, factor)}``.
+
+    Returns ``{setting: {"x": values (in ``unit``), "unit": str, "alignment_mm": array,
+    "level_mm": array, ...}}`` with the largest pointwise sigma of the 30 m chord's errors
+    (and ``max_rms_*_mm``, the predicted RMS of the max, when ``n_samples`` > 0: sampled, so
+    with its ~``0.39 / sqrt(n_samples)`` scatter from point to point); ``zupt_sigma`` also has
+    ``alignment_mm_position``, ``level_mm_position`` with landmark position updates at both
+    ends (``landmark_sigma``), and there the initial velocity sigma follows the update's
+    (the paper's ``p_dv = sigma_v^2``). ``"nominal"``: the values at the nominal point."""
+    if axes is None:
+        axes = SENSITIVITY_AXES
+    elif not isinstance(axes, dict):
+        axes = {a: SENSITIVITY_AXES[a] for a in axes}
+    base = {**NOMINAL, **nominal}
+    runs = {False: nominal_run(), True: nominal_run(position_updates=True)}
+    keys = ("alignment_mm", "level_mm") + (("max_rms_alignment_mm", "max_rms_level_mm") if n_samples else ())
+    out = {"nominal": {k: v for k, v in nominal_chord_accuracy(runs[False], n_samples, seed, **base).items()}}
+    for name, (values, unit, factor) in axes.items():
+        curve = {"x": np.asarray(values, dtype=float), "unit": unit}
+        for pos in (False, True) if name == "zupt_sigma" else (False,):
+            res = []
+            for x in curve["x"]:
+                s = {**base, name: x * factor}
+                if name == "zupt_sigma":
+                    s["velocity_sigma"] = x * factor
+                res.append(nominal_chord_accuracy(runs[pos], n_samples, seed, **s))
+            for k in keys:
+                curve[k + ("_position" if pos else "")] = np.array([r[k] for r in res])
+        out[name] = curve
+    return out
