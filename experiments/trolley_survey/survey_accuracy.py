@@ -41,11 +41,11 @@ from pathlib import Path
 
 import numpy as np
 
-from estimators.chord_accuracy import (DEFAULT_SAMPLES, ChordGrid, chord_error_statistics, chord_errors,
+from estimators.chord_accuracy import (ChordGrid, chord_error_statistics, chord_errors,
                                        chord_grid, predict_chord_sigma)
 
 SMOOTHER = "smoother"
-PREDICTION_SAMPLES = DEFAULT_SAMPLES  # 1000: ~2 % relative standard error per run
+PREDICTION_SAMPLES = 1000  # ~2 % relative standard error per run (grid_error_samples: ~20 ms)
 PAPER_MAX_ERROR_MM = {"alignment": 0.99, "level": 0.70}  # Jiang et al. (2017), Fig. 12 (RMS over 500 runs)
 CHORD_METRICS = ("chord_alignment_max_error_mm", "chord_level_max_error_mm", "chord_alignment_rms_error_mm",
                  "chord_level_rms_error_mm", "predicted_sigma_alignment_mm", "predicted_sigma_level_mm",
@@ -150,10 +150,16 @@ def irregularity_figure(out: Path, sr: SurveyRun, track, title: str) -> str:
 
     plt = _pyplot()
     ta, tv = sr.truth_irregularity(track)
-    s = sr.grid.s
-    pa, pv = sr.prediction.pointwise_alignment_mm, sr.prediction.pointwise_level_mm
+    gap = np.flatnonzero(np.diff(sr.grid.s) > 1.5 * sr.grid.ds) + 1  # chord ends: no line across
+
+    def split(x):
+        return np.insert(np.asarray(x, dtype=float), gap, np.nan)
+
+    s = split(sr.grid.s)
+    ta, tv, err_a, err_v = split(ta), split(tv), split(sr.alignment), split(sr.level)
+    pa, pv = split(sr.prediction.pointwise_alignment_mm), split(sr.prediction.pointwise_level_mm)
     fig, ax = plt.subplots(4, 1, figsize=(9.0, 10.0), sharex=True)
-    for i, (name, true, err, band) in enumerate((("alignment", ta, sr.alignment, pa), ("level", tv, sr.level, pv))):
+    for i, (name, true, err, band) in enumerate((("alignment", ta, err_a, pa), ("level", tv, err_v, pv))):
         a = ax[2 * i]
         a.plot(s, 1e3 * true, lw=0.9, label="true")
         a.plot(s, 1e3 * (true + err), lw=0.9, ls="--", label="estimated (smoother)")
@@ -202,31 +208,48 @@ def trajectory_figure(out: Path, sr: SurveyRun, length: float = 60.0) -> str:
     return "trajectory_3d.png"
 
 
+#: Jiang et al. (2017), Figs. 8-11: the settings each figure varies (estimators.chord_accuracy.SENSITIVITY_AXES)
+SENSITIVITY_FIGURES = {8: ("velocity-update accuracy", ("zupt_sigma",)),
+                       9: ("sensor noise", ("gyro_arw_deg_sqrt_h", "accel_noise_ug_sqrt_hz")),
+                       10: ("initial attitude errors", ("tilt_sigma", "heading_sigma")),
+                       11: ("sensor biases", ("gyro_bias_instability_deg_h", "accel_bias_instability_ug"))}
+
+
 def sensitivity_figures(out: Path) -> list[str]:
-    """Figs. 8-11 (the predicted chord sigma against the velocity-update accuracy, the sensor
-    noise, the initial attitude errors and the biases) from
-    :func:`estimators.chord_accuracy.sensitivity_curves`, when the module has it."""
-    try:
-        from estimators.chord_accuracy import sensitivity_curves
-    except ImportError:
-        return []
+    """``sensitivity_fig8.png`` ... ``fig11.png`` (Jiang et al. (2017), Figs. 8-11): the largest
+    pointwise sigma of the 30 m chord errors against one setting at a time, the others at the
+    paper's nominal, from :func:`estimators.chord_accuracy.sensitivity_curves` (the covariance
+    analysis of the paper's constant-speed run; every other value of its axes, to keep a run's
+    figures to seconds)."""
+    from estimators.chord_accuracy import SENSITIVITY_AXES, sensitivity_curves
     from experiments.plots import _pyplot
 
+    axes = {k: (v[0][::2] if v[0].size > 3 else v[0], *v[1:]) for k, v in SENSITIVITY_AXES.items()}
+    curves = sensitivity_curves(axes)
+    nominal = curves["nominal"]
     plt = _pyplot()
     files = []
-    for k, curve in enumerate(sensitivity_curves(), 8):
-        fig, ax = plt.subplots(figsize=(6.5, 4.0))
-        x = np.asarray(curve["x"])
-        for label, y in curve["curves"].items():
-            ax.plot(x, np.asarray(y), marker="o", ms=3, lw=1.0, label=label)
-        ax.set(xlabel=curve["x_label"], ylabel=curve.get("y_label", "predicted σ of the chord error [mm]"),
-               title=f"Jiang et al. (2017), Fig. {k}: {curve['title']}")
-        if curve.get("log_x"):
-            ax.set_xscale("log")
-        ax.grid(alpha=0.3)
-        ax.legend(fontsize=8)
+    for number, (what, names) in SENSITIVITY_FIGURES.items():
+        names = [n for n in names if n in curves]
+        if not names:
+            continue
+        fig, ax = plt.subplots(1, len(names), figsize=(5.2 * len(names), 4.0), squeeze=False)
+        for a, name in zip(ax[0], names):
+            c = curves[name]
+            for key, label, style in (("alignment_mm", "alignment", "-"), ("level_mm", "level", "-"),
+                                      ("alignment_mm_position", "alignment, with position updates", "--"),
+                                      ("level_mm_position", "level, with position updates", "--")):
+                if key in c:
+                    a.plot(c["x"], c[key], ls=style, marker="o", ms=3, lw=1.0, label=label)
+            a.axhline(nominal["alignment_mm"], color="C0", lw=0.6, ls=":")
+            a.axhline(nominal["level_mm"], color="C1", lw=0.6, ls=":")
+            a.set_xscale("log")
+            a.set(xlabel=f"{name} [{c['unit']}]", ylabel="largest pointwise σ of the chord error [mm]")
+            a.grid(alpha=0.3, which="both")
+            a.legend(fontsize=7)
+        ax[0, 0].set_title(f"Jiang et al. (2017), Fig. {number}: {what} (dotted: the nominal)", fontsize=9)
         fig.tight_layout()
-        name = f"sensitivity_fig{k}.png"
+        name = f"sensitivity_fig{number}.png"
         fig.savefig(out / name, dpi=110)
         plt.close(fig)
         files.append(name)
