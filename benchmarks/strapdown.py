@@ -7,13 +7,16 @@ sin^2(pi t / 60) m/s (a stop every 60 s), heading N45E +- 17 deg, grade +- 1 %, 
 
 Timed (fastest of --repeat, on a fresh INS each time):
 
-  ours, mechanisation   ``Strapdown.integrate``: the plain-float loop, attitude to roll/pitch/heading
-                        vectorised at the end
+  ours, mechanisation   ``Strapdown.integrate``: the compiled (numba) kernel writes an (n, 10) array,
+                        attitude to roll/pitch/heading vectorised at the end
   ours, observer        ``StrapdownINS.run``: one ``Observer.step`` per sample, as in a co-simulation
   python-ins            ``compute_increments_from_imu`` + ``Integrator.integrate`` (numba, compiled
                         before timing), to a pandas trajectory
 
 and the largest position, velocity and attitude error of each against the simulator's truth.
+Then the JIT warm-up: a fresh process imports :mod:`estimators.strapdown` and integrates 10
+samples, once with an empty numba cache (compiling) and once with the cache that run left
+(``NUMBA_CACHE_DIR`` pointed at a temporary directory, so the repository's own cache is untouched).
 
     python benchmarks/strapdown.py [--duration 700] [--dt 0.005] [--repeat 3] [--out FILE.json]
 """
@@ -23,8 +26,11 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import platform
+import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -76,6 +82,31 @@ def best(fn, repeat: int) -> tuple[float, object]:
     return min(times), out
 
 
+FIRST_CALL = """
+import time
+t0 = time.perf_counter()
+import numpy as np
+from estimators.strapdown import Strapdown
+t1 = time.perf_counter()
+Strapdown.from_rph(0.5, 2.0, 30.0, (0, 0, 0), (0, 0, 0), 0.005).integrate(np.zeros((10, 6)))
+print(t1 - t0, time.perf_counter() - t1)
+"""
+
+
+def first_call() -> dict:
+    """Seconds a fresh process spends importing the INS (numba included) and on its first
+    ``integrate``, without and with numba's on-disk cache."""
+    out = {}
+    with tempfile.TemporaryDirectory() as cache:
+        env = {**os.environ, "NUMBA_CACHE_DIR": cache, "PYTHONPATH": str(ROOT)}
+        for name in ("uncached", "cached"):
+            res = subprocess.run([sys.executable, "-c", FIRST_CALL], env=env, cwd=ROOT, check=True,
+                                 capture_output=True, text=True)
+            imp, call = map(float, res.stdout.split())
+            out[name] = {"import_s": imp, "first_integrate_s": call}
+    return out
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--duration", type=float, default=700.0, help="simulated seconds (default 700)")
@@ -123,10 +154,13 @@ def main(argv=None) -> int:
     for name, r in rows.items():
         print(f"{name:22s} {r['seconds']:7.2f} {r['us_per_sample']:10.1f} {r['position_m']:10.2e} "
               f"{r['velocity_m_s']:12.2e} {r['attitude_rad']:12.2e}")
+    warm = first_call()
+    for name, r in warm.items():
+        print(f"fresh process, {name} JIT: import {r['import_s']:.2f} s, first integrate {r['first_integrate_s']:.2f} s")
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(json.dumps({"machine": platform.platform(), "python": platform.python_version(),
-                                    "samples": n, "dt": args.dt, "duration_s": args.duration, "results": rows},
-                                   indent=2))
+                                    "samples": n, "dt": args.dt, "duration_s": args.duration, "results": rows,
+                                    "first_call": warm}, indent=2))
     print(f"-> {args.out}")
     return 0
 

@@ -130,12 +130,11 @@ from dataclasses import fields
 from typing import Any, ClassVar
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from estimators import kalman
 from estimators.attitude import dcm_from_rph, perturb, rph_from_dcm
 from estimators.ins_error_model import (DR, DV, PHI, ErrorModel, ImuGrade, corrected_position,
-                                        ned_difference)
+                                        ned_difference, skews)
 from estimators.ins_observer import INCREMENTS
 from estimators.observer import OfflineObserver
 from estimators.strapdown import NAV, Strapdown
@@ -386,6 +385,36 @@ def _quat_rotvec(x: float, y: float, z: float):
     return c, k * x, k * y, k * z
 
 
+def _dcm_rph(roll, pitch, heading) -> np.ndarray:
+    """C_b^n = R_z(heading) R_y(pitch) R_x(roll) of arrays ``(M,)`` -> ``(M, 3, 3)`` (plain
+    numpy: scipy's Rotation costs ~1 ms per call to build, more than a block of the filter)."""
+    sr, cr, sp, cp, sh, ch = np.sin(roll), np.cos(roll), np.sin(pitch), np.cos(pitch), np.sin(heading), np.cos(heading)
+    C = np.empty((np.shape(roll)[0], 3, 3))
+    C[:, 0, 0], C[:, 0, 1], C[:, 0, 2] = cp * ch, -cr * sh + sr * sp * ch, sr * sh + cr * sp * ch
+    C[:, 1, 0], C[:, 1, 1], C[:, 1, 2] = cp * sh, cr * ch + sr * sp * sh, -sr * ch + cr * sp * sh
+    C[:, 2, 0], C[:, 2, 1], C[:, 2, 2] = -sp, sr * cp, cr * cp
+    return C
+
+
+def _rph_dcm(C: np.ndarray) -> np.ndarray:
+    """(roll, pitch, heading) of ``(M, 3, 3)`` DCMs, as ``Strapdown.rph`` -> ``(M, 3)``."""
+    return np.column_stack((np.arctan2(C[:, 2, 1], C[:, 2, 2]),
+                            np.arctan2(-C[:, 2, 0], np.hypot(C[:, 2, 1], C[:, 2, 2])),
+                            np.arctan2(C[:, 1, 0], C[:, 0, 0])))
+
+
+def _rotations(phi: np.ndarray) -> np.ndarray:
+    """exp([phi x]) of rotation vectors ``(M, 3)`` (Rodrigues; series below 1e-4 rad)."""
+    a2 = np.einsum("ki,ki->k", phi, phi)
+    a = np.sqrt(a2)
+    small = a < 1e-4
+    safe = np.where(small, 1.0, a)
+    s = np.where(small, 1.0 - a2 / 6.0, np.sin(safe) / safe)
+    c = np.where(small, 0.5 - a2 / 24.0, (1.0 - np.cos(safe)) / (safe * safe))
+    K = skews(phi)
+    return np.eye(3) + s[:, None, None] * K + c[:, None, None] * (K @ K)
+
+
 def _dcm(q) -> np.ndarray:
     q0, q1, q2, q3 = q
     return np.array([[q0 * q0 + q1 * q1 - q2 * q2 - q3 * q3, 2 * (q1 * q2 - q0 * q3), 2 * (q1 * q3 + q0 * q2)],
@@ -455,12 +484,10 @@ class AidedInsSmoother(OfflineObserver, SmootherRecord):
         flag = mask[:, 0] & (np.nan_to_num(Z[:, 0]) >= 0.5)
         if self.s["zupt_source"] == "flag":
             return flag
-        try:
-            from estimators.zupt_detector import detect_stationary, detector_scores
-        except ImportError as exc:
-            raise ValueError("AidedInsSmoother: zupt_source 'detector' needs estimators.zupt_detector "
-                             f"(detect_stationary, detector_scores), which is not available: {exc}") from None
-        detected = np.asarray(detect_stationary(U, self.dt), dtype=bool)
+        from estimators.zupt_detector import detect_stationary, detector_scores, noise_sigmas
+        sigmas = noise_sigmas({k: v for k, v in self.s.items() if k in _GRADE_NAMES}, self.dt)
+        detected = np.asarray(detect_stationary(U, self.dt, **({"sigma_a": sigmas[0], "sigma_g": sigmas[1]}
+                                                              if min(sigmas) > 0 else {})), dtype=bool)
         self.detector = dict(detector_scores(detected, flag))
         return detected
 
@@ -472,11 +499,11 @@ class AidedInsSmoother(OfflineObserver, SmootherRecord):
             bad = np.flatnonzero(np.abs(steps - 1.0) > 1e-6)
             if bad.size:
                 k = int(bad[0])
-                raise ValueError(f"AidedInsSmoother.run: t[{k + 1}] = {t[k + 1]!r} s is not one IMU step "
-                                 f"({dt!r} s) after t[{k}] = {t[k]!r} s (the record must be uniform)")
+                raise ValueError(f"AidedInsSmoother.run: t[{k + 1}] = {float(t[k + 1])!r} s is not one IMU step "
+                                 f"({dt!r} s) after t[{k}] = {float(t[k])!r} s (the record must be uniform)")
         if not np.isfinite(U).all():
             k = int(np.flatnonzero(~np.isfinite(U).all(axis=1))[0])
-            raise ValueError(f"AidedInsSmoother.run: increments at t = {t[k]!r} s are not finite")
+            raise ValueError(f"AidedInsSmoother.run: increments at t = {float(t[k])!r} s are not finite")
         m = self.epoch_steps
         idx = np.arange(0, n_samples, m)
         if idx[-1] != n_samples - 1:
@@ -488,10 +515,11 @@ class AidedInsSmoother(OfflineObserver, SmootherRecord):
 
         shapes = {"Pm": (N, n, n), "Pp": (N, n, n), "Phi": (max(N - 1, 0), n, n), "Q": (max(N - 1, 0), n, n),
                   "C": (max(N - 1, 0), n, n), "Ps": (N, n, n), "a": (N, n), "d": (N, n), "s": (N, n),
-                  "c": (N, n), "nav": (n_samples, 9)}
+                  "c": (N, n), "nav": (n_samples, 9), "nominal": (N, 17)}
         store = _Store(shapes, s["memory_budget_mb"] * 1e6)
         self._init_record(store, model.names)
         self.spilled = store.spilled
+        self.zupt_epochs = zupt
         t_start = time.perf_counter()
         strap = self._forward(t, Z, U, mask, idx, zupt, store)
         t_mid = time.perf_counter()
@@ -553,6 +581,7 @@ class AidedInsSmoother(OfflineObserver, SmootherRecord):
             C0 = _dcm(tuple(ins.quaternion()))
             if k0 < 0:  # epoch 0: the initial state, no prediction
                 rows = nav[:1].copy()
+                store["nominal"][0] = np.r_[lat0, h0, v0, 0.0, 0.0, -earth.gravity(lat0, h0), C0.ravel()]
                 C = C0[None]
                 Phi = Qd = None
                 first = 0
@@ -562,7 +591,7 @@ class AidedInsSmoother(OfflineObserver, SmootherRecord):
                 nav[i0 + 1:i1 + 1] = ins.integrate(U[i0 + 1:i1 + 1])
                 strap += time.perf_counter() - ts
                 rows = np.asarray(nav[idx[k0 + 1:k1 + 1]])
-                C = dcm_from_rph(rows[:, 6], rows[:, 7], rows[:, 8]).reshape(-1, 3, 3)
+                C = _dcm_rph(rows[:, 6], rows[:, 7], rows[:, 8])
                 C[-1] = _dcm(tuple(ins.quaternion()))
                 lat = np.concatenate(([lat0], rows[:, 0]))
                 hh = np.concatenate(([h0], rows[:, 2]))
@@ -576,6 +605,7 @@ class AidedInsSmoother(OfflineObserver, SmootherRecord):
                 Phi, Qd = model.discretize(model.system_matrices(lat_m, h_m, v_m, f_n, C_m), T)
                 Phi_s[k0:k1], Q_s[k0:k1] = Phi, Qd
                 first = k0 + 1
+                store["nominal"][first:k1 + 1] = np.column_stack((lat_m, h_m, v_m, f_n, C_m.reshape(-1, 9)))
                 if odometer:  # the INS's mean body-x speed over each epoch
                     pos = np.vstack(((lat0, lon0, h0), rows[:, :3]))
                     dr = ned_difference(pos[1:, 0], pos[1:, 1], pos[1:, 2], pos[:-1, 0], pos[:-1, 1], pos[:-1, 2])
@@ -685,10 +715,18 @@ class AidedInsSmoother(OfflineObserver, SmootherRecord):
             lat, lon, h = corrected_position(block[:, 0], block[:, 1], block[:, 2], corr[:, DR])
             out[lo:hi, 0], out[lo:hi, 1], out[lo:hi, 2] = lat, lon, h
             out[lo:hi, 3:6] = block[:, 3:6] - corr[:, DV]
-            R = Rotation.from_rotvec(corr[:, PHI]) * Rotation.from_euler("ZYX", block[:, [8, 7, 6]])
-            out[lo:hi, 6:9] = R.as_euler("ZYX")[:, ::-1]
+            out[lo:hi, 6:9] = _rph_dcm(_rotations(corr[:, PHI]) @ _dcm_rph(block[:, 6], block[:, 7], block[:, 8]))
             out[lo:hi, 9:12] = np.sqrt(np.clip(v, 0.0, None))
         return out
+
+    def nominal(self) -> dict[str, np.ndarray]:
+        """The nominal trajectory the filter linearised about, per epoch ``k`` the values it
+        held over the interval that ends at ``t_k`` (mid-interval latitude, height, velocity,
+        attitude; mean specific force): the keyword arguments of :func:`covariance_analysis`
+        (``times, f_n, C_bn, latitude, height, velocity``) that reproduce its covariances."""
+        m = np.asarray(self._store["nominal"])
+        return {"times": self.epoch_times.copy(), "f_n": m[:, 5:8].copy(), "C_bn": m[:, 8:17].reshape(-1, 3, 3).copy(),
+                "latitude": m[:, 0].copy(), "height": m[:, 1].copy(), "velocity": m[:, 2:5].copy()}
 
     def finish(self) -> dict:
         out = {"filter_seconds": self.filter_seconds, "smoother_seconds": self.smoother_seconds,
@@ -738,21 +776,25 @@ def covariance_analysis(times, f_n, C_bn, latitude, velocity, zupt, position=Non
     P = model.initial_covariance(s["tilt_sigma"], s["heading_sigma"], s["velocity_sigma"], s["position_sigma"])
     H_v, H_r = model.velocity_rows(), model.position_rows()
     R_v, R_r = s["zupt_sigma"] ** 2 * np.eye(3), s["landmark_sigma"] ** 2 * np.eye(3)
+    for a in range(1, N, 512):  # Phi, Q of the epochs in blocks (bounded temporaries)
+        b = min(a + 512, N)
+        A = model.system_matrices(lat[a:b], hgt[a:b], vel[a:b], f_n[a:b], C_bn[a:b])
+        store["Phi"][a - 1:b - 1], store["Q"][a - 1:b - 1] = model.discretize(A, np.diff(times[a - 1:b]))
     zero = np.zeros(n)
     for k in range(N):
         if k:
-            A = model.system_matrix(lat[k], hgt[k], vel[k], f_n[k], C_bn[k])
-            Phi, Qd = model.discretize(A, times[k] - times[k - 1])
-            store["Phi"][k - 1], store["Q"][k - 1] = Phi, Qd
-            P = kalman.predict_covariance(P, Phi, Qd)
+            Phi, Qd = store["Phi"][k - 1], store["Q"][k - 1]
+            P = Phi @ P @ Phi.T + Qd
+            P = 0.5 * (P + P.T)
         store["Pm"][k] = P
         Hs = [H for H, use in ((H_v, zupt[k]), (H_r, pos[k])) if use]
         if Hs:
             Rs = [R for R, use in ((R_v, zupt[k]), (R_r, pos[k])) if use]
-            R = np.zeros((3 * len(Rs), 3 * len(Rs)))
-            for i, Ri in enumerate(Rs):
-                R[3 * i:3 * i + 3, 3 * i:3 * i + 3] = Ri
-            H = np.vstack(Hs)
+            if len(Hs) == 1:
+                H, R = Hs[0], Rs[0]
+            else:
+                H, R = np.vstack(Hs), np.zeros((6, 6))
+                R[:3, :3], R[3:, 3:] = Rs
             P = kalman.update(zero, P, np.zeros(H.shape[0]), H, R).P
         store["Pp"][k] = P
     _smooth(store)
