@@ -318,8 +318,17 @@ class ObserverBank:
               "are NaN from there on", file=sys.stderr)
 
     def write_block(self, rows: np.ndarray) -> None:
-        for row in rows:
-            self.write(row)
+        if self.online:
+            for row in rows:
+                self.write(row)
+            return
+        # offline observers only (a Monte Carlo of a smoother): nothing to do per row
+        self.times.extend(rows[:, 0].tolist())
+        self._row += rows.shape[0]
+        if self.offline:
+            self._record.append(rows[:, self._kept])
+        if self.recorder is not None:
+            self.recorder.write_block(rows[:, :1])
 
     def close(self, complete: bool) -> None:
         if self.recorder is not None:
@@ -359,8 +368,11 @@ class ObserverBank:
         cached = self._arrays
         if cached is None or cached[0].shape[0] != len(self.times):
             t = np.asarray(self.times)
-            self._arrays = cached = (t, np.vstack(self.estimates) if self.estimates
-                                     else np.empty((0, len(self.columns))))
+            if not self.online:  # no estimates: one empty row per time
+                est = np.empty((t.size, 0))
+            else:
+                est = np.vstack(self.estimates) if self.estimates else np.empty((0, len(self.columns)))
+            self._arrays = cached = (t, est)
         return cached
 
     def offline_estimates(self) -> dict[str, np.ndarray]:

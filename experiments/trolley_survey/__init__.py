@@ -85,6 +85,16 @@ def metric_name(kind: str, suffix: str = "") -> str:
     return f"ins_{kind}_error_max_{UNITS[kind]}{suffix}"
 
 
+def position_errors(est: np.ndarray, true: np.ndarray) -> np.ndarray:
+    """Estimate minus truth of rows of :data:`NAV` (or of latitude, longitude, height): (n, 3)
+    NED in m, the latitude and longitude differences times the local radii plus height."""
+    from models import earth
+
+    rn, re = earth.principal_radii(true[:, 0], true[:, 2])
+    return np.stack([(est[:, 0] - true[:, 0]) * rn, (est[:, 1] - true[:, 1]) * re * np.cos(true[:, 0]),
+                     -(est[:, 2] - true[:, 2])], axis=1)
+
+
 def navigation_errors(est: np.ndarray, true: np.ndarray) -> dict[str, np.ndarray]:
     """INS minus truth, rows of :data:`NAV` (rad, m, m/s): ``position`` (n, 3) NED in m (the
     latitude and longitude differences times the local radii plus height), ``velocity``
@@ -93,11 +103,8 @@ def navigation_errors(est: np.ndarray, true: np.ndarray) -> dict[str, np.ndarray
     from scipy.spatial.transform import Rotation
 
     from estimators.attitude import dcm_from_rph
-    from models import earth
 
-    rn, re = earth.principal_radii(true[:, 0], true[:, 2])
-    position = np.stack([(est[:, 0] - true[:, 0]) * rn, (est[:, 1] - true[:, 1]) * re * np.cos(true[:, 0]),
-                         -(est[:, 2] - true[:, 2])], axis=1)
+    position = position_errors(est, true)
     C = dcm_from_rph(*est[:, 6:9].T) @ np.swapaxes(dcm_from_rph(*true[:, 6:9].T), 1, 2)
     return {"position": position, "velocity": est[:, 3:6] - true[:, 3:6],
             "attitude": Rotation.from_matrix(C).as_rotvec()}
@@ -198,7 +205,7 @@ def _survey(run: RunData):
         return None
     key = (id(run.signals), id(obs))
     if _LAST_SURVEY[0] != key:
-        _LAST_SURVEY[:] = [key, SurveyRun(run, navigation_errors, NAV)]
+        _LAST_SURVEY[:] = [key, SurveyRun(run, position_errors)]
     return _LAST_SURVEY[1]
 
 

@@ -4,7 +4,7 @@ Monte Carlo, and their figures.
 Per run (:func:`chord_metrics`), from the offline observer ``smoother``
 (:class:`estimators.aided_ins.AidedInsSmoother`) and the trolley's truth:
 
-* the smoothed position error ``e`` (local NED, m; :func:`experiments.trolley_survey.navigation_errors`)
+* the smoothed position error ``e`` (local NED, m; :func:`experiments.trolley_survey.position_errors`)
   at the samples of the survey's chord grid (:func:`estimators.chord_accuracy.chord_grid` on the
   trolley's true ``distance``: 0.5 m spacing, consecutive 30 m chords, 5 m offset);
 * the chord errors of every surveyed point, exact (:func:`estimators.chord_accuracy.chord_errors`
@@ -60,8 +60,11 @@ def grid_error_samples(record, times, n_samples: int, seed: int | None = None) -
 
     want = record.nearest_epochs(times)
     epochs = np.unique(want)
-    C, S_factor, Ps = record._store["C"], record._factors(), record.P_smoothed
-    n = S_factor.shape[1]
+    C, L, Ps = record._store["C"], record._factors(), record.P_smoothed
+    n = L.shape[1]
+    lo = int(epochs[0])
+    C = np.asarray(C[lo:int(epochs[-1])])  # the gains and noise covariances the chain passes
+    S = L[lo:int(epochs[-1])] @ L[lo:int(epochs[-1])].transpose(0, 2, 1)
     rng = np.random.default_rng(seed)
     out = np.empty((n_samples, want.size, 3))
     K = int(epochs[-1])
@@ -69,11 +72,10 @@ def grid_error_samples(record, times, n_samples: int, seed: int | None = None) -
     drawn = {K: e}
     for k, j in zip(epochs[-2::-1].tolist(), epochs[:0:-1].tolist()):
         G, Sigma = np.eye(n), np.zeros((n, n))
-        for m in range(j - 1, k - 1, -1):
-            Cm = np.asarray(C[m])
+        for m in range(j - 1 - lo, k - 1 - lo, -1):
+            Cm = C[m]
             G = Cm @ G
-            Sm = S_factor[m] @ S_factor[m].T
-            Sigma = Cm @ Sigma @ Cm.T + Sm
+            Sigma = Cm @ Sigma @ Cm.T + S[m]
         e = e @ G.T + rng.standard_normal((n_samples, n)) @ _factor(Sigma).T
         drawn[k] = e
     for i, k in enumerate(want.tolist()):
@@ -91,14 +93,15 @@ def _factor(P: np.ndarray) -> np.ndarray:
 class SurveyRun:
     """One run's chord grid, truth, smoothed errors and chord errors (built once per hook)."""
 
-    def __init__(self, run, navigation_errors, nav_names):
+    def __init__(self, run, position_errors):
         s, r = run.signals, run.roles
         self.obs = run.observers[SMOOTHER]
         self.t = np.asarray(s["time"])
         n = self.t.size
-        est = np.column_stack([np.asarray(run.estimates[f"{SMOOTHER}.{k}"])[:n] for k in nav_names])
-        true = np.column_stack([np.asarray(s[r[f"true_{k}"]])[:n] for k in nav_names])
-        self.error = navigation_errors(est, true)["position"]
+        geodetic = ("latitude", "longitude", "height")
+        est = np.column_stack([np.asarray(run.estimates[f"{SMOOTHER}.{k}"])[:n] for k in geodetic])
+        true = np.column_stack([np.asarray(s[r[f"true_{k}"]])[:n] for k in geodetic])
+        self.error = position_errors(est, true)
         self.distance = np.asarray(s[r["true_distance"]])[:n]
         self.positions = np.column_stack([np.asarray(s[r[f"true_{k}"]])[:n] for k in ("north", "east", "down")])
         self.sigma = np.column_stack([np.asarray(run.estimates[f"{SMOOTHER}.sigma_{k}"])[:n]
