@@ -316,7 +316,7 @@ def test_bound_settings_survive_export_and_a_value_overrides_them(tmp_path, fmu_
     folder = tmp_path / "bad"
     shutil.copytree(REPLAY, folder)
     (folder / "SystemStructure.ssd").write_text(bad)
-    with pytest.raises(UserError, match="Setting 'height': give a value or a connector, not both"):
+    with pytest.raises(UserError, match="Setting 'height': give one of value, connector or parameter, not value and connector"):
         read_system(folder, fmu_dirs=[DEFAULT_OUT])
 
 

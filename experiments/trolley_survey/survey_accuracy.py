@@ -96,16 +96,19 @@ class SurveyRun:
     def __init__(self, run, position_errors):
         s, r = run.signals, run.roles
         self.obs = run.observers[SMOOTHER]
-        self.t = np.asarray(s["time"])
-        n = self.t.size
         geodetic = ("latitude", "longitude", "height")
-        est = np.column_stack([np.asarray(run.estimates[f"{SMOOTHER}.{k}"])[:n] for k in geodetic])
-        true = np.column_stack([np.asarray(s[r[f"true_{k}"]])[:n] for k in geodetic])
-        self.error = position_errors(est, true)
-        self.distance = np.asarray(s[r["true_distance"]])[:n]
-        self.positions = np.column_stack([np.asarray(s[r[f"true_{k}"]])[:n] for k in ("north", "east", "down")])
-        self.sigma = np.column_stack([np.asarray(run.estimates[f"{SMOOTHER}.sigma_{k}"])[:n]
-                                      for k in ("north", "east", "down")])
+        est = np.column_stack([np.asarray(run.estimates[f"{SMOOTHER}.{k}"]) for k in geodetic])
+        # an offline observer's estimates are on its own samples: every stride-th record row
+        stride = max(1, -(-np.asarray(s["time"]).size // est.shape[0]))
+        rows = slice(0, stride * est.shape[0], stride)
+        def truth(k):
+            return np.asarray(s[r[f"true_{k}"]])[rows]
+
+        self.t = np.asarray(s["time"])[rows]
+        self.error = position_errors(est, np.column_stack([truth(k) for k in geodetic]))
+        self.distance = truth("distance")
+        self.positions = np.column_stack([truth(k) for k in ("north", "east", "down")])
+        self.sigma = np.column_stack([np.asarray(run.estimates[f"{SMOOTHER}.sigma_{k}"]) for k in ("north", "east", "down")])
         self.seed = run.base.get("seed")
         try:
             self.grid: ChordGrid | None = chord_grid(self.distance)
