@@ -569,8 +569,8 @@ def reduced_monte_carlo(tmp_path_factory, fmu_dir):
 def test_reduced_monte_carlo_agrees_with_its_prediction(reduced_monte_carlo):
     """20 runs: the mean of the per-run predictions within 30 % of the RMS over runs of the
     max chord errors (the issue's 15 % at 500 runs; 20 runs leave ~12 % sampling error on an
-    RMS of a max, std(M^2) / mean(M^2) ~ 1.3). Measured (seeds 1-20): MC 1.81 / 1.41 mm,
-    predicted 1.71 / 1.63 mm (alignment / level)."""
+    RMS of a max, std(M^2) / mean(M^2) ~ 1.3). Measured (seeds 1-20): MC 1.86 / 1.37 mm,
+    predicted 1.72 / 1.64 mm (alignment / level), ratios 0.92 / 1.20."""
     out, table = reduced_monte_carlo
     s = table["paper_montecarlo"]["summary"]
     for kind in ("alignment", "level"):
@@ -586,8 +586,9 @@ def test_reduced_monte_carlo_agrees_with_its_prediction(reduced_monte_carlo):
     assert len(runs) == 20 and all(m["master"] == "container" and m["stop_time_s"] == 36.0 for m in runs.values())
 
 
-@pytest.mark.xfail(strict=False, reason="measured 1.81 / 1.41 mm (alignment / level) against the paper's 0.99 / 0.70: "
-                                        "the prediction agrees with our Monte Carlo, not with the paper (see the report)")
+@pytest.mark.xfail(strict=False, reason="measured 1.86 / 1.37 mm (alignment / level, 20 runs; 1.81 / 1.48 over 40) "
+                                        "against the paper's 0.99 / 0.70: our prediction agrees with our Monte Carlo, "
+                                        "the paper's figure is not reached with the navigation grade as modelled")
 def test_reduced_monte_carlo_reaches_the_paper(reduced_monte_carlo):
     """The issue's bar with 30 % slack for 20 runs: RMS of the max <= the paper's x 1.3."""
     s = reduced_monte_carlo[1]["paper_montecarlo"]["summary"]
