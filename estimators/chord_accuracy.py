@@ -48,10 +48,11 @@ the track (for the plots), and the relative standard error of the prediction (de
 Measured ``std(M^2) / mean(M^2)``: 0.78 (alignment) and 0.75 (level) on the paper's nominal
 run with its sensor noise (:func:`nominal_chord_accuracy`), 1.16 and 1.40 in the noise-free
 simplified case of eqs. 29-31 (there the level error is one Gaussian times a shape, ``M^2 ~
-chi^2_1``: ``sqrt 2``). So ``S`` samples give ~``0.39 / sqrt(S)``: 3.2 % at ``S = 150``
-(:data:`DEFAULT_SAMPLES`), 1.2 % at 1000; a 500-run Monte Carlo's own RMS has ~1.7 %. Cost
-on the 30 m run (600 KF epochs, this 2-core machine): the smoother's backward sampling
-~0.17 ms per sample (25 ms for 150), the chord errors ~0.006 ms per sample.
+chi^2_1``: ``sqrt 2``). So ``S`` samples give ~``0.39 / sqrt(S)``: 1.7 % at ``S = 500``
+(:data:`DEFAULT_SAMPLES`), 1.2 % at 1000, 3.2 % at 150; a 500-run Monte Carlo's own RMS has
+~1.7 %. Cost on the 30 m run (61 grid epochs of 600; this 2-core machine, loaded): the
+smoother's sampling of the grid epochs ~23-28 ms for 500 samples, the chord errors ~2 ms
+(both about linear in ``S``).
 :func:`chord_sigma_from_covariance` gives the pointwise sigma exactly from a joint
 covariance instead (``SmootherRecord.joint_covariance`` at the grid epochs).
 
@@ -105,15 +106,14 @@ printed eqs. 29 and 31 to 1e-12 (no typo found in them). Eq. 30's denominator is
 
 Use in a study
 --------------
-With the record's true ``distance``, ``north, east, down`` and the smoothed position
-errors ``err`` (local NED, m; e.g. ``estimators.ins_error_model.ned_difference`` of the
-smoothed and the true latitude, longitude, height) and the smoother ``obs``::
-
-    grid = chord_grid(distance)
-    r = truth_ned[grid.sample]
-    metrics = chord_error_statistics(*chord_errors(grid, r, err[grid.sample]))
-    pred = predict_chord_sigma(grid, r, obs.error_samples(time[grid.sample], DEFAULT_SAMPLES, seed))
-    metrics.update(pred.metrics())      # predicted_sigma_alignment_mm, predicted_sigma_level_mm
+:func:`survey_chords` does it for one run: from the record's true ``distance``, ``north,
+east, down``, the smoothed position errors (local NED, m; e.g.
+``estimators.ins_error_model.ned_difference`` of the smoothed and the true latitude,
+longitude, height), the record times and the smoother, it returns the chord errors along
+the track, the prediction and the study's metrics ``chord_{alignment,level}_{max,rms}_error_mm``
+and ``predicted_sigma_{alignment,level}_mm``. The smoother's samples are at its KF epoch
+nearest to each grid sample (within 0.025 s, 2.5 cm at 1 m/s; the errors are smooth over
+metres).
 """
 
 from __future__ import annotations
@@ -123,10 +123,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from estimators.ins_error_model import DR
+from models import earth
 from models.track_geometry import vector_distance
 
-#: samples of the joint Gaussian per prediction: ~3 % relative standard error, ~25 ms (module doc)
-DEFAULT_SAMPLES = 150
+#: samples of the joint Gaussian per prediction: ~1.7 % relative standard error, ~25 ms (module doc)
+DEFAULT_SAMPLES = 500
 MM = 1e3
 
 
@@ -334,6 +336,39 @@ def predict_chord_sigma(grid: ChordGrid, true_positions, error_samples) -> Chord
                            MM * np.sqrt(np.mean(v * v, axis=0)), grid.s.copy(), e.shape[0])
 
 
+@dataclass
+class ChordSurvey:
+    """One run's chords: the ``grid``, the chord errors ``alignment``, ``level`` (m, at
+    ``grid.s``), the ``prediction`` (None without a smoother) and ``metrics`` (mm, the
+    study's names)."""
+
+    grid: ChordGrid
+    alignment: np.ndarray
+    level: np.ndarray
+    prediction: ChordPrediction | None
+    metrics: dict
+
+
+def survey_chords(distance, true_positions, position_errors, times=None, smoother=None,
+                  n_samples: int = DEFAULT_SAMPLES, seed: int | None = None) -> ChordSurvey:
+    """The chord metrics of one run from its whole record (all arrays per record sample):
+    true ``distance`` (m), ``true_positions`` (n0 NED, m; the trolley's ``north, east,
+    down``), ``position_errors`` (smoothed minus true, local NED, m), and, for the
+    prediction, the record ``times`` (s) and the ``smoother`` (anything with
+    ``error_samples(times, n, seed)``: ``AidedInsSmoother`` after its run, or a
+    ``covariance_analysis`` result). Only the grid samples are used."""
+    grid = chord_grid(distance)
+    r = np.asarray(true_positions, dtype=float)[grid.sample]
+    a, v = chord_errors(grid, r, np.asarray(position_errors, dtype=float)[grid.sample])
+    metrics = chord_error_statistics(a, v)
+    pred = None
+    if smoother is not None:
+        t = np.asarray(times, dtype=float)[grid.sample]
+        pred = predict_chord_sigma(grid, r, smoother.error_samples(t, n_samples, seed))
+        metrics.update(pred.metrics())
+    return ChordSurvey(grid, a, v, pred, metrics)
+
+
 # ---- closed forms of the simplified case (eqs. 29-31) ------------------------------------------
 
 def _q2_q3(t_s, k, T):
@@ -446,8 +481,6 @@ def nominal_run(length: float = 30.0, speed: float = 1.0, azimuth: float = 45.0 
     """The paper's simulated survey (§ 6.1): straight, level, N45E, 30 m at 1 m/s, velocity
     (ZUPT) updates at the first and last epochs, landmark position updates there too when
     ``position_updates``."""
-    from models import earth
-
     n = int(round(length / speed / filter_period))
     times = np.arange(n + 1) * filter_period
     dist = speed * times
@@ -469,15 +502,12 @@ def nominal_chord_accuracy(run: NominalRun, n_samples: int = 0, seed: int = 1, *
     the surveyed points (exact, from the smoother's joint covariance), ``pointwise_*_mm``, and
     with ``n_samples`` > 0 the predicted RMS over runs of the max ``|error|``
     (``max_rms_alignment_mm``, ``max_rms_level_mm``; :func:`predict_chord_sigma`)."""
-    from estimators.aided_ins import covariance_analysis
+    from estimators.aided_ins import covariance_analysis  # the INS and its filter: only here
 
     ca = covariance_analysis(run.times, run.f_n, run.C_bn, run.latitude, run.velocity, run.zupt,
                              position=run.position, **settings)
-    dr = slice(6, 9)
-    n = len(ca.state_names)
-    full = ca.joint_covariance(run.grid_epochs)
-    m = run.grid_epochs.size
-    cov = full.reshape(m, n, m, n)[:, dr, :, dr].reshape(3 * m, 3 * m)
+    n, m = len(ca.state_names), run.grid_epochs.size
+    cov = ca.joint_covariance(run.grid_epochs).reshape(m, n, m, n)[:, DR, :, DR].reshape(3 * m, 3 * m)
     sy, sz = chord_sigma_from_covariance(run.grid, run.true_positions, cov)
     out = {"alignment_mm": MM * float(sy.max()), "level_mm": MM * float(sz.max()),
            "pointwise_alignment_mm": MM * sy, "pointwise_level_mm": MM * sz}
@@ -508,7 +538,7 @@ def sensitivity_curves(axes=None, n_samples: int = 0, seed: int = 1, **nominal) 
     base = {**NOMINAL, **nominal}
     runs = {False: nominal_run(), True: nominal_run(position_updates=True)}
     keys = ("alignment_mm", "level_mm") + (("max_rms_alignment_mm", "max_rms_level_mm") if n_samples else ())
-    out = {"nominal": {k: v for k, v in nominal_chord_accuracy(runs[False], n_samples, seed, **base).items()}}
+    out = {"nominal": nominal_chord_accuracy(runs[False], n_samples, seed, **base)}
     for name, (values, unit, factor) in axes.items():
         curve = {"x": np.asarray(values, dtype=float), "unit": unit}
         for pos in (False, True) if name == "zupt_sigma" else (False,):

@@ -12,7 +12,7 @@ from mpmath import mp
 from estimators.chord_accuracy import (DEFAULT_SAMPLES, NOMINAL, alignment_variance, chord_error_jacobian,
                                        chord_error_statistics, chord_errors, chord_grid, chord_sigma_from_covariance,
                                        closed_form_sigma, nominal_chord_accuracy, nominal_run, sensitivity_curves,
-                                       level_variance, linear_chord_errors, predict_chord_sigma)
+                                       level_variance, linear_chord_errors, predict_chord_sigma, survey_chords)
 
 D2R = math.pi / 180.0
 G = 9.8
@@ -426,3 +426,48 @@ def test_sensitivity_curves_follow_the_papers_remarks():
     # the accelerometer bias acts on the level only (Fig. 11; eq. 29 has no nabla)
     ab = c["accel_bias_instability_ug"]
     assert abs(ab["alignment_mm"][1] / ab["alignment_mm"][0] - 1) < 1e-3 and ab["level_mm"][1] > 2 * ab["level_mm"][0]
+
+
+def test_prediction_from_the_smoothers_samples_agrees_with_its_joint_covariance():
+    """On the paper's nominal run: the pointwise sigma from ``error_samples`` through the exact
+    chord map equals the one from ``joint_covariance`` through the linear map, and the
+    predicted RMS of the max lies above the largest pointwise sigma (a max of 51 points)."""
+    from estimators.aided_ins import covariance_analysis
+    run = nominal_run()
+    ca = covariance_analysis(run.times, run.f_n, run.C_bn, run.latitude, run.velocity, run.zupt, **NOMINAL)
+    m = run.grid_epochs.size
+    cov = ca.joint_covariance(run.grid_epochs).reshape(m, 12, m, 12)[:, 6:9, :, 6:9].reshape(3 * m, 3 * m)
+    sy, sz = chord_sigma_from_covariance(run.grid, run.true_positions, cov)
+    S = 4000
+    p = predict_chord_sigma(run.grid, run.true_positions, ca.error_samples(run.times[run.grid_epochs], S, 5))
+    assert np.allclose(p.pointwise_alignment_mm, 1e3 * sy, rtol=5 / math.sqrt(2 * S))
+    assert np.allclose(p.pointwise_level_mm, 1e3 * sz, rtol=5 / math.sqrt(2 * S))
+    assert 1.3 * 1e3 * sy.max() < p.sigma_alignment_mm < 1.7 * 1e3 * sy.max()
+    assert 1.3 * 1e3 * sz.max() < p.sigma_level_mm < 1.7 * 1e3 * sz.max()
+    # the stated precision: std(M^2) / mean(M^2) ~ 0.78 here, so 0.39 / sqrt(S)
+    assert 0.3 < p.relative_se_alignment * math.sqrt(S) < 0.5 and 0.3 < p.relative_se_level * math.sqrt(S) < 0.5
+    print(f"nominal: max pointwise sigma {1e3 * sy.max():.3f} / {1e3 * sz.max():.3f} mm, predicted RMS of the "
+          f"max {p.sigma_alignment_mm:.3f} / {p.sigma_level_mm:.3f} mm (alignment / level)")
+
+
+def test_survey_chords_of_a_record_gives_the_study_metrics():
+    """A 200 Hz record of the nominal run with a stop at each end, errors drawn from the
+    covariance analysis: the metrics are those of the grid samples, the prediction attached."""
+    from estimators.aided_ins import covariance_analysis
+    run = nominal_run()
+    ca = covariance_analysis(run.times, run.f_n, run.C_bn, run.latitude, run.velocity, run.zupt, **NOMINAL)
+    t = np.arange(0.0, 30.0 + 1e-9, 0.005)
+    dist = np.clip(t - 1.0, 0.0, 28.0) * 30.0 / 28.0  # 1 s at rest, 28 s moving, 1 s at rest
+    truth = straight(dist, math.radians(45.0))
+    err = ca.error_samples(t, 1, seed=3)[0]
+    sv = survey_chords(dist, truth, err, times=t, smoother=ca, n_samples=300, seed=4)
+    assert sorted(sv.metrics) == sorted(["chord_alignment_max_error_mm", "chord_level_max_error_mm",
+                                         "chord_alignment_rms_error_mm", "chord_level_rms_error_mm",
+                                         "predicted_sigma_alignment_mm", "predicted_sigma_level_mm"])
+    g = chord_grid(dist)
+    a, v = chord_errors(g, truth[g.sample], err[g.sample])
+    assert sv.metrics["chord_level_max_error_mm"] == 1e3 * np.abs(v).max()
+    assert np.array_equal(sv.alignment, a) and sv.prediction.n_samples == 300
+    assert g.sample[0] == 0 and dist[g.sample[-1]] == 30.0 and np.all(dist[g.sample[1:]] > 0)
+    assert 0.5 < sv.metrics["predicted_sigma_alignment_mm"] < 3.0
+    assert survey_chords(dist, truth, err).prediction is None
