@@ -536,26 +536,6 @@ def test_paper_run_chord_errors_from_its_files(paper_run):
     assert "max \\|error\\|" in (out / "report.md").read_text()
 
 
-def test_grid_error_samples_have_the_smoothers_joint_covariance(paper_run):
-    """The collapsed sampler draws the smoother's exact joint covariance of the position
-    errors at the grid epochs (AidedInsSmoother.joint_covariance), to the sampling error."""
-    import experiments.trolley_survey as ts
-    from experiments.trolley_survey.survey_accuracy import grid_error_samples
-
-    run_experiment("trolley_survey", "paper_montecarlo", write_files=False, seed=3, progress=False, log=io.StringIO())
-    sr = ts._LAST_SURVEY[1]
-    times = sr.t[sr.grid.sample][::6]  # 9 of the 61 grid samples
-    S = 20000
-    x = grid_error_samples(sr.obs, times, S, seed=7).reshape(S, -1)
-    epochs = sr.obs.nearest_epochs(times)
-    n = len(sr.obs.state_names)
-    J = sr.obs.joint_covariance(epochs).reshape(len(epochs), n, len(epochs), n)[:, 6:9, :, 6:9]
-    exact = J.reshape(3 * len(epochs), 3 * len(epochs))
-    sd = np.sqrt(np.diag(exact))
-    corr_diff = (np.cov(x.T) - exact) / np.outer(sd, sd)
-    assert np.abs(corr_diff).max() < 5.0 / math.sqrt(S)  # ~0.007 per entry at 1 sigma
-
-
 @pytest.fixture(scope="module")
 def reduced_monte_carlo(tmp_path_factory, fmu_dir):
     """20 runs of paper_montecarlo through the study (two Dask workers)."""
@@ -578,7 +558,7 @@ def test_reduced_monte_carlo_agrees_with_its_prediction(reduced_monte_carlo):
         predicted = s[f"predicted_sigma_{kind}_mm"]["mean"]
         assert abs(predicted / mc - 1.0) < 0.30, (kind, mc, predicted)
         assert s[f"chord_{kind}_max_error_mm"]["min"] > 0
-        assert s[f"predicted_sigma_{kind}_mm"]["std"] < 0.05 * predicted  # 1000 draws per run: ~2 %
+        assert s[f"predicted_sigma_{kind}_mm"]["std"] < 0.05 * predicted  # 1000 draws per run: ~1.2 %
     md = (out / "table.md").read_text()
     assert "| paper_montecarlo |" in md and "predicted / MC" in md and "0.99" in md and "0.70" in md
     assert (out / "max_error_histograms.png").is_file()

@@ -12,21 +12,13 @@ Per run (:func:`chord_metrics`), from the offline observer ``smoother``
   run, and the rms: ``chord_alignment_max_error_mm``, ``chord_level_max_error_mm``,
   ``chord_alignment_rms_error_mm``, ``chord_level_rms_error_mm``;
 * the prediction of that statistic from the smoother's joint Gaussian of the errors:
-  :data:`PREDICTION_SAMPLES` draws at the grid's epochs (:func:`grid_error_samples`, seeded by
-  the run's seed) through the same exact chord errors, ``sqrt(mean max^2)``:
+  :data:`PREDICTION_SAMPLES` draws at the grid's epochs (``smoother.error_samples``, seeded by
+  the run's seed) through the same exact chord errors, ``sqrt(mean max^2)``
+  (:func:`estimators.chord_accuracy.survey_chords` does both):
   ``predicted_sigma_alignment_mm``, ``predicted_sigma_level_mm`` (over a Monte Carlo the mean of
   the per-run predictions sits beside the RMS over runs of the max errors);
 * ``filter_seconds``, ``smoother_seconds`` (the observer's own split; its INS integration is
   ``observers.smoother.strapdown_seconds``), ``chords_surveyed``, ``chord_points``.
-
-:func:`grid_error_samples` draws what ``AidedInsSmoother.error_samples`` draws (the RTS
-smoothing errors' backward chain ``e_k = C_k e_{k+1} + w_k``, ``Cov w_k = S_k``), with the chain
-collapsed onto the wanted epochs: between consecutive wanted epochs ``k < j``,
-``e_k = G e_j + u``, ``G = C_k ... C_{j-1}``, ``Cov u = Sigma`` from ``Sigma <- C_m Sigma C_m^T +
-S_m`` for ``m = j - 1 ... k`` (``Sigma = 0``, ``G = I`` at ``j``), and ``e_K ~ N(0, P^s_K)`` at
-the last one. The same joint Gaussian, drawn with one Gaussian step per grid point instead of
-per filter epoch: 61 steps instead of 720 on the paper's 30 m run (0.16 s -> 0.02 s per run
-with 1000 draws, which the 500-run Monte Carlo's budget needs).
 
 The truth irregularity a figure shows (eq. 1 of the body's true path: the rail's plus the
 trolley's wobble) is ``chord_errors`` of the true positions against the design positions at the
@@ -41,53 +33,14 @@ from pathlib import Path
 
 import numpy as np
 
-from estimators.chord_accuracy import (ChordGrid, chord_error_statistics, chord_errors,
-                                       chord_grid, predict_chord_sigma)
+from estimators.chord_accuracy import ChordGrid, chord_errors, survey_chords
 
 SMOOTHER = "smoother"
-PREDICTION_SAMPLES = 1000  # ~2 % relative standard error per run (grid_error_samples: ~20 ms)
+PREDICTION_SAMPLES = 1000  # ~1.2 % relative standard error per run, ~30 ms on the 30 m run
 PAPER_MAX_ERROR_MM = {"alignment": 0.99, "level": 0.70}  # Jiang et al. (2017), Fig. 12 (RMS over 500 runs)
 CHORD_METRICS = ("chord_alignment_max_error_mm", "chord_level_max_error_mm", "chord_alignment_rms_error_mm",
                  "chord_level_rms_error_mm", "predicted_sigma_alignment_mm", "predicted_sigma_level_mm",
                  "filter_seconds", "smoother_seconds")
-
-
-def grid_error_samples(record, times, n_samples: int, seed: int | None = None) -> np.ndarray:
-    """``(n_samples, len(times), 3)``: draws of the smoothed position error (NED, m) at the
-    epochs nearest to ``times`` from the smoother's joint Gaussian (module docstring), for a
-    :class:`estimators.aided_ins.SmootherRecord` after its run."""
-    from estimators.ins_error_model import DR
-
-    want = record.nearest_epochs(times)
-    epochs = np.unique(want)
-    C, L, Ps = record._store["C"], record._factors(), record.P_smoothed
-    n = L.shape[1]
-    lo = int(epochs[0])
-    C = np.asarray(C[lo:int(epochs[-1])])  # the gains and noise covariances the chain passes
-    S = L[lo:int(epochs[-1])] @ L[lo:int(epochs[-1])].transpose(0, 2, 1)
-    rng = np.random.default_rng(seed)
-    out = np.empty((n_samples, want.size, 3))
-    K = int(epochs[-1])
-    e = rng.standard_normal((n_samples, n)) @ _factor(np.asarray(Ps[K])).T
-    drawn = {K: e}
-    for k, j in zip(epochs[-2::-1].tolist(), epochs[:0:-1].tolist()):
-        G, Sigma = np.eye(n), np.zeros((n, n))
-        for m in range(j - 1 - lo, k - 1 - lo, -1):
-            Cm = C[m]
-            G = Cm @ G
-            Sigma = Cm @ Sigma @ Cm.T + S[m]
-        e = e @ G.T + rng.standard_normal((n_samples, n)) @ _factor(Sigma).T
-        drawn[k] = e
-    for i, k in enumerate(want.tolist()):
-        out[:, i] = drawn[k][:, DR]
-    return out
-
-
-def _factor(P: np.ndarray) -> np.ndarray:
-    """``L`` with ``L L^T = P`` for a symmetric PSD ``P`` (eigen-decomposition: a zero-variance
-    state, e.g. a bias the grade does not have, is fine)."""
-    w, V = np.linalg.eigh(0.5 * (P + P.T))
-    return V * np.sqrt(np.clip(w, 0.0, None))[None, :]
 
 
 class SurveyRun:
@@ -109,25 +62,21 @@ class SurveyRun:
         self.distance = truth("distance")
         self.positions = np.column_stack([truth(k) for k in ("north", "east", "down")])
         self.sigma = np.column_stack([np.asarray(run.estimates[f"{SMOOTHER}.sigma_{k}"]) for k in ("north", "east", "down")])
-        self.seed = run.base.get("seed")
+        self.grid: ChordGrid | None = None
         try:
-            self.grid: ChordGrid | None = chord_grid(self.distance)
+            survey = survey_chords(self.distance, self.positions, self.error, self.t, self.obs, PREDICTION_SAMPLES,
+                                   run.base.get("seed"))
         except ValueError:  # a run shorter than one grid spacing
-            self.grid = None
-        if self.grid is not None and self.grid.n_points == 0:
-            self.grid = None
-        if self.grid is not None:
-            g = self.grid.sample
-            self.alignment, self.level = chord_errors(self.grid, self.positions[g], self.error[g])
+            return
+        if survey.grid.n_points:
+            self.grid, self.alignment, self.level = survey.grid, survey.alignment, survey.level
+            self.prediction, self.chord_metrics = survey.prediction, survey.metrics
 
     def metrics(self) -> dict:
         out = {"filter_seconds": float(self.obs.filter_seconds), "smoother_seconds": float(self.obs.smoother_seconds)}
         if self.grid is None:
             return {**out, "chords_surveyed": 0, "chord_points": 0}
-        g = self.grid.sample
-        samples = grid_error_samples(self.obs, self.t[g], PREDICTION_SAMPLES, self.seed)
-        self.prediction = predict_chord_sigma(self.grid, self.positions[g], samples)
-        return {**chord_error_statistics(self.alignment, self.level), **self.prediction.metrics(), **out,
+        return {**self.chord_metrics, **out,
                 "prediction_relative_se_alignment": self.prediction.relative_se_alignment,
                 "prediction_relative_se_level": self.prediction.relative_se_level,
                 "chords_surveyed": int(self.grid.chord_start.size), "chord_points": int(self.grid.n_points)}
