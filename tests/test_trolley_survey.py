@@ -558,7 +558,7 @@ def test_reduced_monte_carlo_agrees_with_its_prediction(reduced_monte_carlo):
         predicted = s[f"predicted_sigma_{kind}_mm"]["mean"]
         assert abs(predicted / mc - 1.0) < 0.30, (kind, mc, predicted)
         assert s[f"chord_{kind}_max_error_mm"]["min"] > 0
-        assert s[f"predicted_sigma_{kind}_mm"]["std"] < 0.05 * predicted  # 1000 draws per run: ~1.2 %
+        assert s[f"predicted_sigma_{kind}_mm"]["std"] < 0.06 * predicted  # 500 draws per run: ~1.7 %
     md = (out / "table.md").read_text()
     assert "| paper_montecarlo |" in md and "predicted / MC" in md and "0.99" in md and "0.70" in md
     assert (out / "max_error_histograms.png").is_file()

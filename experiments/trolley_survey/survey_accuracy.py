@@ -33,10 +33,10 @@ from pathlib import Path
 
 import numpy as np
 
-from estimators.chord_accuracy import ChordGrid, chord_errors, survey_chords
+from estimators.chord_accuracy import DEFAULT_SAMPLES, ChordGrid, chord_errors, survey_chords
 
 SMOOTHER = "smoother"
-PREDICTION_SAMPLES = 1000  # ~1.2 % relative standard error per run, ~30 ms on the 30 m run
+PREDICTION_SAMPLES = DEFAULT_SAMPLES  # 500: ~1.7 % relative standard error per run (the mean over N runs: / sqrt(N))
 PAPER_MAX_ERROR_MM = {"alignment": 0.99, "level": 0.70}  # Jiang et al. (2017), Fig. 12 (RMS over 500 runs)
 CHORD_METRICS = ("chord_alignment_max_error_mm", "chord_level_max_error_mm", "chord_alignment_rms_error_mm",
                  "chord_level_rms_error_mm", "predicted_sigma_alignment_mm", "predicted_sigma_level_mm",
