@@ -189,7 +189,7 @@ def sensitivity_figures(out: Path) -> list[str]:
         names = [n for n in names if n in curves]
         if not names:
             continue
-        fig, ax = plt.subplots(1, len(names), figsize=(5.2 * len(names), 4.0), squeeze=False)
+        fig, ax = plt.subplots(1, len(names), figsize=(max(6.8, 5.2 * len(names)), 4.2), squeeze=False)
         for a, name in zip(ax[0], names):
             c = curves[name]
             for key, label, style in (("alignment_mm", "alignment", "-"), ("level_mm", "level", "-"),
@@ -203,7 +203,7 @@ def sensitivity_figures(out: Path) -> list[str]:
             a.set(xlabel=f"{name} [{c['unit']}]", ylabel="largest pointwise σ of the chord error [mm]")
             a.grid(alpha=0.3, which="both")
             a.legend(fontsize=7)
-        ax[0, 0].set_title(f"Jiang et al. (2017), Fig. {number}: {what} (dotted: the nominal)", fontsize=9)
+        fig.suptitle(f"Jiang et al. (2017), Fig. {number}: {what} (dotted: the paper's nominal)", fontsize=9)
         fig.tight_layout()
         name = f"sensitivity_fig{number}.png"
         fig.savefig(out / name, dpi=110)
