@@ -1,7 +1,9 @@
 """railfmu command line (contract in docs/architecture.md, "Command line").
 
 Every user error (missing file, bad parameter, bad --set) is one line on stderr and exit
-code 2; no traceback.
+code 2; no traceback. Without ``--master``, ``run`` and ``study`` use the master the
+experiment prefers (``<rf:FixedStep stepSize="..." master="container"/>`` in its SSD's
+``org.railfmu.experiment`` annotation), else jacobi.
 """
 
 from __future__ import annotations
@@ -130,10 +132,16 @@ def _add_overrides(p) -> None:
     p.add_argument("--set", action="append", metavar="COMPONENT.PARAM=VALUE",
                    help="override a parameter (repeatable)")
     p.add_argument("--seed", type=int, help="seed of every random source (track, sensor noise)")
-    p.add_argument("--stop-time", type=float, help="override the SSD's DefaultExperiment stop time [s]")
+    p.add_argument("--stop-time", type=float,
+                   help="override the stop time [s] (the variant's experiment.stopTime, else the SSD's "
+                        "DefaultExperiment)")
     p.add_argument("--step-size", type=float,
                    help="the communication step [s] (default: the SSD's step annotation, else the smallest "
                         "DefaultExperiment stepSize of the FMUs)")
+
+
+MASTER_HELP = ("jacobi, gauss-seidel or container (default: the experiment's own choice, the master attribute "
+               "of rf:FixedStep in its SSD, else jacobi)")
 
 
 class _Parser(argparse.ArgumentParser):
@@ -158,7 +166,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("experiment")
     p.add_argument("--variant")
     p.add_argument("--out", help="output folder (default out/EXP/VARIANT)")
-    p.add_argument("--master", default="jacobi", help="jacobi (default), gauss-seidel or container")
+    p.add_argument("--master", default=None, help=MASTER_HELP)
     _add_overrides(p)
     p.set_defaults(fn=cmd_run)
     p = sub.add_parser("study", help="variants x seeds of an experiment, in parallel (Dask) -> table")
@@ -172,7 +180,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--out", help="output folder (default out/EXP_study)")
     p.add_argument("--scheduler", help="address of a running Dask scheduler (default: a local cluster)")
     p.add_argument("--workers", type=int, help="local cluster size (default: min(runs in all, 2))")
-    p.add_argument("--master", default="jacobi", help="jacobi (default), gauss-seidel or container")
+    p.add_argument("--master", default=None, help=MASTER_HELP)
     _add_overrides(p)
     p.set_defaults(fn=cmd_study)
     p = sub.add_parser("export", help="a self-contained .ssp (SSD + parameters + FMUs) of one variant")

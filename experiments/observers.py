@@ -21,7 +21,13 @@ both see the same samples):
   (:mod:`experiments.fmu_process`); it is freed when the run closes;
 * **settings bound to signals** (``rf:Setting name connector``): the observer is created
   again at its first sample with those settings set to the signals' values there, in its
-  units (an INS started from the vehicle's true initial state).
+  units (an INS started from the vehicle's true initial state); settings bound to a
+  component's parameter (``rf:Setting name parameter``) arrive as the reader resolved them;
+* **switched off**: an observer whose setting ``enabled`` is false (a variant or ``--set
+  ins.enabled=false``) is not built: it costs nothing and has no estimates nor metrics;
+* **after the run** :meth:`ObserverBank.estimators` hands the study each finished estimator
+  object (online and offline) by name, for what its per-sample outputs do not carry (a
+  smoother's joint covariance, its timings).
 
 ``estimates.csv`` (the online estimates, each held between its observer's samples) is
 written as the run goes, like ``signals.csv``.
@@ -67,7 +73,7 @@ def make_observer(spec: ObserverSpec, step_size: float, where: str, system: Syst
     if offline != spec.offline:
         raise UserError(f"{label}: {spec.cls} is an {'offline' if offline else 'online'} estimator; "
                         f"declare it with offline=\"{str(offline).lower()}\"")
-    settings = dict(spec.settings)
+    settings = spec.class_settings
     process = None
     if "process_component" in settings:
         process = _process_model(cls, str(settings.pop("process_component")), system, label, spec.name)
@@ -116,7 +122,7 @@ def bind_settings(feed: _Feed, row: np.ndarray, columns: list[int], where: str) 
     ``row`` (its first sample; ``columns`` their indices in ``row``), in the observer's units."""
     spec = feed.spec
     values = {k: a * float(row[i]) + b for k, i, (a, b) in zip(spec.setting_signals, columns, feed.set_map)}
-    settings = dict(spec.settings)
+    settings = spec.class_settings
     if "process_component" in settings:  # the FMU process model of the first instance, kept
         settings.pop("process_component")
         settings["process"] = getattr(feed.obs, "process", None)
@@ -216,6 +222,8 @@ class ObserverBank:
         self.online: list[_Feed] = []
         self.offline: list[_Feed] = []
         for spec in system.observers:
+            if not spec.enabled:  # switched off by a variant or --set: not built, not fed
+                continue
             obs, stride = make_observer(spec, system.step_size, where, system)
             feed = _Feed(spec, obs, stride, event=spec.event if spec.event is not None else obs.event_driven,
                          period=_period(spec, system.step_size))
@@ -240,6 +248,11 @@ class ObserverBank:
     @property
     def observers(self) -> list:
         return [f.obs for f in self.online]
+
+    def estimators(self) -> dict[str, object]:
+        """Every built estimator by observer name, online and offline (after the run: the
+        finished objects, e.g. for a smoother's ``error_samples``)."""
+        return {f.spec.name: f.obs for f in (*self.online, *self.offline)}
 
     @property
     def columns(self) -> list[str]:
@@ -305,8 +318,17 @@ class ObserverBank:
               "are NaN from there on", file=sys.stderr)
 
     def write_block(self, rows: np.ndarray) -> None:
-        for row in rows:
-            self.write(row)
+        if self.online:
+            for row in rows:
+                self.write(row)
+            return
+        # offline observers only (a Monte Carlo of a smoother): nothing to do per row
+        self.times.extend(rows[:, 0].tolist())
+        self._row += rows.shape[0]
+        if self.offline:
+            self._record.append(rows[:, self._kept])
+        if self.recorder is not None:
+            self.recorder.write_block(rows[:, :1])
 
     def close(self, complete: bool) -> None:
         if self.recorder is not None:
@@ -346,8 +368,11 @@ class ObserverBank:
         cached = self._arrays
         if cached is None or cached[0].shape[0] != len(self.times):
             t = np.asarray(self.times)
-            self._arrays = cached = (t, np.vstack(self.estimates) if self.estimates
-                                     else np.empty((0, len(self.columns))))
+            if not self.online:  # no estimates: one empty row per time
+                est = np.empty((t.size, 0))
+            else:
+                est = np.vstack(self.estimates) if self.estimates else np.empty((0, len(self.columns)))
+            self._arrays = cached = (t, est)
         return cached
 
     def offline_estimates(self) -> dict[str, np.ndarray]:

@@ -26,6 +26,7 @@ from fmus.errors import UserError
 from .study_protocol import RunData, Study
 
 HERE = Path(__file__).resolve().parent
+DEFAULT_MASTER = "jacobi"  # when neither the command line nor the experiment (rf:Master) names one
 
 
 def experiment_names() -> list[str]:
@@ -92,7 +93,7 @@ def load_system(exp: Experiment, variant: str | None, sets: dict | None = None, 
 
 
 def run_experiment(name: str, variant: str | None = None, out: Path | str | None = None,
-                   master: str = "jacobi", sets: dict | None = None, seed: int | None = None,
+                   master: str | None = None, sets: dict | None = None, seed: int | None = None,
                    stop_time: float | None = None, step_size: float | None = None,
                    progress: bool = True, log=sys.stderr, write_files: bool = True,
                    series: bool = False) -> dict:
@@ -100,14 +101,15 @@ def run_experiment(name: str, variant: str | None = None, out: Path | str | None
     ``out`` and returns the metrics. With ``write_files=False`` (a Monte Carlo member) it
     writes nothing and imports no plotting: the metrics are the result. ``series``: the
     returned metrics carry the study's per-run arrays under ``"series"`` (not in metrics.json)
-    for its Monte Carlo figures (:meth:`Study.series`)."""
+    for its Monte Carlo figures (:meth:`Study.series`). ``master`` None: the one the experiment
+    prefers (``<rf:FixedStep master=...>`` in its SSD, :attr:`System.master`), else ``jacobi``."""
     from fmus.cosim.masters import MASTERS, run
     from fmus.cosim.recorder import CsvRecorder
 
     from .observers import ObserverBank
 
     t_setup = time.perf_counter()
-    if master not in MASTERS:
+    if master is not None and master not in MASTERS:
         raise UserError(f"--master {master!r}: choose one of {', '.join(MASTERS)}")
     exp = find_experiment(name)
     variant = variant or exp.default_variant
@@ -115,12 +117,14 @@ def run_experiment(name: str, variant: str | None = None, out: Path | str | None
     if write_files and out.exists() and not out.is_dir():
         raise UserError(f"--out {out}: a file of that name exists; give a folder")
     system = load_system(exp, variant, sets, seed, stop_time, step_size)
+    master = master or system.master or DEFAULT_MASTER
     roles = exp.study.bind(system)
     if write_files:
         out.mkdir(parents=True, exist_ok=True)
     for w in system.warnings:
         print(f"railfmu: warning: {w}", file=log)
-    print(f"running {_what_runs(exp, system, variant)}: {system.stop_time - system.start_time:g} s at "
+    until = f" (to {system.stop_time:g} s from {system.stop_time_from})" if system.stop_time_from != "ssd:DefaultExperiment" else ""
+    print(f"running {_what_runs(exp, system, variant)}: {system.stop_time - system.start_time:g} s{until} at "
           f"{system.step_size:g} s (from {system.step_size_from}), {master} master"
           + (f" -> {out}" if write_files else ""), file=log)
 
@@ -142,6 +146,7 @@ def run_experiment(name: str, variant: str | None = None, out: Path | str | None
         raise
 
     signals = {c: result.data[:, j] for j, c in enumerate(result.columns)}
+    observers = bank.estimators()
     t_est, est = bank.arrays()
     estimates = {"time": t_est, **{c: est[:, j] for j, c in enumerate(bank.columns)}, **bank.offline_estimates()}
     if result.early_end:
@@ -151,7 +156,7 @@ def run_experiment(name: str, variant: str | None = None, out: Path | str | None
     metrics = {
         "experiment": exp.name, "variant": variant, "master": master, "seed": seed,
         "start_time_s": system.start_time, "stop_time_s": system.stop_time, "step_size_s": system.step_size,
-        "step_size_from": system.step_size_from,
+        "step_size_from": system.step_size_from, "stop_time_from": system.stop_time_from,
         "end_time_s": result.end_time, "early_end": result.early_end,
         "simulated_seconds": simulated,
         "wall_time_s": result.wall_time_s,
@@ -165,18 +170,18 @@ def run_experiment(name: str, variant: str | None = None, out: Path | str | None
         "notes": result.notes,
     }
     t_study = time.perf_counter()
-    metrics.update(exp.study.metrics(RunData(signals, estimates, metrics, roles)))
+    metrics.update(exp.study.metrics(RunData(signals, estimates, metrics, roles, observers)))
     # where a run's time goes (benchmarks/overhead.py): stepping includes the online observers
     metrics["timing_s"] = {"setup": setup_s, "stepping": result.wall_time_s,
                            "study_metrics": time.perf_counter() - t_study}
-    arrays = exp.study.series(RunData(signals, estimates, metrics, roles)) if series else {}
+    arrays = exp.study.series(RunData(signals, estimates, metrics, roles, observers)) if series else {}
     if write_files:
         (out / "metrics.json").write_text(json.dumps(metrics, indent=2, default=_json_default) + "\n")
     if arrays:
         metrics = {**metrics, "series": arrays}
     if not write_files:
         return metrics
-    files = exp.study.files(RunData(signals, estimates, metrics, roles), out)
+    files = exp.study.files(RunData(signals, estimates, metrics, roles, observers), out)
 
     from .plots import plot_estimates, plot_signals, units_of
 
@@ -184,7 +189,7 @@ def run_experiment(name: str, variant: str | None = None, out: Path | str | None
     units = units_of(system)
     plots = (plot_signals(exp.study.figures_of_signals, signals, roles, units, out, position)
              + plot_estimates(bank, signals, units, out)
-             + exp.study.figures(RunData(signals, estimates, metrics, roles), out))
+             + exp.study.figures(RunData(signals, estimates, metrics, roles, observers), out))
     _report(exp, system, metrics, plots, out)
     offline = [f"estimates_{name}.csv" for name in bank.results]
     print(f"wrote {out}/: {', '.join(['signals.csv', 'estimates.csv', *offline, *files, 'metrics.json', 'report.md', *plots])}",

@@ -67,7 +67,7 @@ def summarise(runs: dict) -> dict[str, dict[str, float]]:
     return {k: statistics([f[k] for f in flat if k in f]) for k in keys}
 
 
-def _run_member(name: str, variant: str, out: str | None, master: str, overrides: dict,
+def _run_member(name: str, variant: str, out: str | None, master: str | None, overrides: dict,
                 series: bool = False) -> dict:
     """Worker task: one run, output captured (workers have no terminal); ``out`` None writes
     nothing; ``series``: the metrics carry the study's per-run arrays (Monte Carlo figures)."""
@@ -82,10 +82,12 @@ def _eta(elapsed: float, done: int, total: int) -> str:
 
 
 def run_study(name: str, out: Path | str | None = None, scheduler: str | None = None,
-              master: str = "jacobi", workers: int | None = None, variants: list[str] | None = None,
+              master: str | None = None, workers: int | None = None, variants: list[str] | None = None,
               runs: int = 1, keep_runs: bool = False, seed: int | None = None, log=sys.stderr,
               **overrides) -> dict:
-    """Run the study; writes table.json and table.md into ``out`` and returns the table."""
+    """Run the study; writes table.json and table.md into ``out`` and returns the table.
+    ``master`` None: each run takes the experiment's preferred master (its SSD's
+    ``<rf:FixedStep master=...>``), else jacobi."""
     from dask.distributed import Client, LocalCluster, as_completed
 
     from fmus.generate.build import DEFAULT_OUT, build_all
@@ -153,6 +155,8 @@ def run_study(name: str, out: Path | str | None = None, scheduler: str | None = 
             member_runs = {s: results[v, s] for s in seeds}
             table[v] = {"runs": member_runs, "summary": summarise(member_runs)}
         md.append(exp.study.summary_md({v: t["summary"] for v, t in table.items()}, runs))
+        extra = exp.study.study_tables(table, series)
+        md += ["", extra] if extra else []
         plots = exp.study.study_figures(table, series, out)
         md += ["", *[f"![{p}]({p})" for p in plots], ""] if plots else []
         md += ["", "Each run's files are in <variant>/seed_<seed>/." if keep_runs else

@@ -106,11 +106,15 @@ def bind_role(system, role: Role):
 @dataclass
 class RunData:
     """What a finished run hands the study: recorded signals and estimates (name -> array,
-    with ``time``), the run's base metrics, and the study's roles bound to this system."""
+    with ``time``), the run's base metrics, the study's roles bound to this system, and
+    ``observers``: each observer's finished estimator object by name (online and offline;
+    a switched-off one is absent), for what its per-sample outputs do not carry, e.g.
+    ``run.observers["smoother"].error_samples(...)``."""
     signals: dict[str, np.ndarray]
     estimates: dict[str, np.ndarray]
     base: dict
     roles: dict[str, Any] = field(default_factory=dict)
+    observers: dict[str, Any] = field(default_factory=dict)
 
 
 class Study:
@@ -161,6 +165,11 @@ class Study:
         ``{variant: {"runs": {seed: metrics}, "summary": ...}}``, ``series`` each member's
         :meth:`series` as ``{variant: {seed: arrays}}``. Default: none."""
         return []
+
+    def study_tables(self, table: dict, series: dict[str, dict[int, dict[str, np.ndarray]]]) -> str:
+        """Markdown the Monte Carlo's table.md adds after the summary, from the members'
+        metrics and :meth:`series` (e.g. differences between runs). Default: none."""
+        return ""
 
     def report_md(self, metrics: dict) -> str:
         """The study's section of report.md (default: each observer's raw error)."""

@@ -383,7 +383,8 @@ def build() -> Model:
     deg = math.degrees
     parameters = [
         Parameter("track_file", "Track element table CSV (models/track_geometry.py): an absolute path or "
-                  "relative to resources/ (trolley_track.csv is shipped: 600 m, two curves, grades)",
+                  "relative to resources/ (shipped: trolley_track.csv, 600 m, two curves, grades; "
+                  "trolley_straight_30m.csv, 30 m straight)",
                   start="trolley_track.csv", type="String", source="models/track_geometry.py"),
         Parameter("start_latitude", f"Latitude of the design start point, the n0 origin "
                   f"({deg(DEFAULT_PLACEMENT['start_latitude']):g} deg)", "rad",
@@ -462,7 +463,9 @@ def build() -> Model:
         parameters=parameters, outputs=outputs,
         default_experiment=(0.0, 700.0, 0.005),
         c_sources=["CsvCell.h", "Earth.h", "TrackGeometry.h", "Trolley.c"],
-        resources={"trolley_track.csv": DEFAULT_TRACK},
+        resources={"trolley_track.csv": DEFAULT_TRACK,
+                   # Jiang et al. (2017), §5's simulation: 30 m straight (experiments/trolley_survey paper_montecarlo)
+                   "trolley_straight_30m.csv": DEFAULT_TRACK.parent / "trolley_straight_30m.csv"},
         documentation=__doc__ + "\n\n" + track_geometry.__doc__,
     )
 

@@ -288,3 +288,32 @@ def test_an_fmu_without_binary_or_sources_is_one_line(tmp_path):
         z.writestr("modelDescription.xml", md)
     res = railfmu("run", str(ssd), "--out", str(tmp_path / "run"))
     _assert_one_line_error(res, "stair.fmu has no binary for this platform (linux64) and no sources/")
+
+
+def test_the_experiment_names_its_master_and_a_variant_its_stop_time(tmp_path):
+    """`<rf:FixedStep master="container"/>` in the SSD is used when --master is not given; a variant's
+    experiment.stopTime shortens the run, --stop-time still wins; --set NAME.enabled=false
+    switches an observer off."""
+    exp = _broken_experiment(tmp_path, '<rf:FixedStep stepSize="0.001"/>',
+                             '<rf:FixedStep stepSize="0.001" master="container"/>')
+    (exp / "variants" / "short.ssv").write_text(
+        (exp / "variants" / "harmonic.ssv").read_text().replace(
+            "<ssv:Parameters>", '<ssv:Parameters><ssv:Parameter name="experiment.stopTime">'
+                                '<ssv:Real value="0.5"/></ssv:Parameter>'))
+    res = railfmu("run", str(exp), "--variant", "short", "--out", str(tmp_path / "a"),
+                  "--set", "alignment.enabled=false")
+    assert res.returncode == 0, res.stderr
+    m = json.loads((tmp_path / "a" / "metrics.json").read_text())
+    assert (m["master"], m["stop_time_s"], m["stop_time_from"]) == ("container", 0.5,
+                                                                   "variant short (experiment.stopTime)")
+    assert m["observers"] == {} and "(to 0.5 s from variant short" in res.stderr
+    assert next(csv.reader(open(tmp_path / "a" / "estimates.csv"))) == ["time"]
+    res = railfmu("run", str(exp), "--variant", "short", "--master", "jacobi", "--stop-time", "0.2",
+                  "--out", str(tmp_path / "b"))
+    assert res.returncode == 0, res.stderr
+    m = json.loads((tmp_path / "b" / "metrics.json").read_text())
+    assert (m["master"], m["stop_time_s"]) == ("jacobi", 0.2) and "alignment" in m["observers"]
+    bad = _broken_experiment(tmp_path / "bad", '<rf:FixedStep stepSize="0.001"/>',
+                             '<rf:FixedStep stepSize="0.001" master="newton"/>')
+    _assert_one_line_error(railfmu("run", str(bad), "--out", str(tmp_path / "c")),
+                           "FixedStep master='newton': choose one of jacobi, gauss-seidel, container")

@@ -234,7 +234,10 @@ def _feedthrough(md) -> set[str]:
 
 
 # a replayed GNSS log has a fix every 10 s: 2 s would show no change
-EXCHANGE_STOP = {"train_resistance_measured": 30.0}
+EXCHANGE_STOP = {"train_resistance_measured": 30.0,
+                 # the straight run at rest for 1 s: by 2 s its lateral increment dv_y spans 3e-8 m/s, five
+                 # orders below dv_x, whose rounding (1e-19) is then 2e-12 of dv_y's range; at 5 s, 2e-13
+                 "trolley_survey/paper_montecarlo": 5.0}
 
 
 def _exchange_cases():
@@ -255,7 +258,7 @@ def test_exported_ssp_runs_in_libcosim_like_our_jacobi_master(tmp_path, experime
     from fmus.ssp import read_system
 
     ssp = tmp_path / f"{experiment}_{variant}.ssp"
-    stop = EXCHANGE_STOP.get(experiment, 2.0)
+    stop = EXCHANGE_STOP.get(f"{experiment}/{variant}", EXCHANGE_STOP.get(experiment, 2.0))
     res = subprocess.run([sys.executable, "-m", "experiments.cli", "export", experiment, "--variant", variant,
                           "--stop-time", f"{stop:g}", "-o", str(ssp)], capture_output=True, text=True)
     assert res.returncode == 0, res.stderr
@@ -278,9 +281,10 @@ def test_exported_ssp_runs_in_libcosim_like_our_jacobi_master(tmp_path, experime
         md = read_model_description(str(comp.fmu))
         skip = _feedthrough(md)
         vrs = {v.name: v.valueReference for v in md.modelVariables}
+        real = {v.name for v in md.modelVariables if v.type == "Real"}  # value references are per type
         for signal in (s for s in ours.columns[1:] if s.startswith(comp.name + ".")):
             var = signal.split(".", 1)[1]
-            if var not in skip:
+            if var not in skip and var in real:
                 assert observer.start_time_series(index[comp.name], vrs[var], CosimVariableType.REAL)
                 compared.append((comp.name, var, vrs[var]))
     assert execution.simulate_until(n_steps * step_ns)

@@ -336,3 +336,34 @@ def test_a_failing_observer_neither_ends_the_run_nor_loses_the_others(fmu_dir, t
     assert "failed" not in m["echo"]
     err = capsys.readouterr().err
     assert "Observer 'bad' failed (FloatingPointError at t = 0.05 s" in err and "Traceback" not in err
+
+
+def test_a_switched_off_observer_is_not_built(fmu_dir, tmp_path):
+    """`enabled=false` (a variant or --set): the bank builds, feeds and scores only the others;
+    a class that could not even be imported is not touched."""
+    obs = observer() + observer(name="off", cls="NoSuchClass", attrs="").replace(
+        "</rf:Observer>", '<rf:Setting name="enabled" value="false"/></rf:Observer>')
+    system = system_of(tmp_path, fmu_dir, obs)
+    sig, bank = run_bank(system, tmp_path)
+    assert [s.name for s in bank.specs] == ["echo"] and set(bank.estimators()) == {"echo"}
+    assert set(bank.metrics(sig)) == {"echo"}
+    on = system_of(tmp_path, fmu_dir, obs.replace("NoSuchClass", "Echo"))
+    on.observers[1].settings["enabled"] = True  # as --set off.enabled=true: built, without the setting
+    assert set(ObserverBank(on, None).estimators()) == {"echo", "off"}
+
+
+def test_estimators_hand_the_finished_objects_to_the_study(fmu_dir, tmp_path):
+    """After the run the bank hands each estimator object, online and offline, by name."""
+    obs = observer() + observer(name="mean", cls="RecordMean", v="", attrs='offline="true"', truth="")
+    sig, bank = run_bank(system_of(tmp_path, fmu_dir, obs))
+    est = bank.estimators()
+    assert isinstance(est["echo"], Echo) and isinstance(est["mean"], RecordMean)
+    assert est["echo"].steps == len(sig["time"])
+
+
+def test_settings_bound_to_parameters_reach_the_class(fmu_dir, tmp_path):
+    """A setting bound to a component parameter is passed as that parameter's value."""
+    obs = observer(name="p", truth="").replace(
+        "</rf:Observer>", '<rf:Setting name="gain" parameter="sensors.sigma_4"/></rf:Observer>')
+    system = system_of(tmp_path, fmu_dir, obs)
+    assert ObserverBank(system, None).estimators()["p"].settings == {"gain": 1.0}  # the SSD binds sigma_4 = 1

@@ -554,3 +554,97 @@ def test_variant_and_set_override_observer_settings(fmu_dir, tmp_path):
     assert s.observers[0].settings == {"V": 22.5}
     assert "no component 'filter'" in user_error(read_system, EXP, fmu_dirs=[fmu_dir],
                                                  overrides={"filter": {"V": "1"}})
+
+
+# -- observer settings bound to parameters, the experiment's master and stop time -----------
+
+BOUND = """<ssd:Annotations><ssc:Annotation type="org.railfmu.observers"><rf:Observers>
+  <rf:Observer name="o" class="estimators.x.Y"><rf:Input name="a" connector="wheelset.ddy"/>
+    <rf:Setting name="conicity" parameter="wheelset.alpha"/><rf:Setting name="mass" parameter="wheelset.m"/>
+    <rf:Setting name="level" parameter="track.psd_level"/>{extra}</rf:Observer>
+</rf:Observers></ssc:Annotation></ssd:Annotations>"""
+
+
+def test_observer_setting_bound_to_a_parameter(fmu_dir, tmp_path):
+    """`<rf:Setting name parameter="component.parameter"/>` takes the parameter's final value:
+    the FMU start value, an SSD binding, the variant, --set, in that order; a value given to
+    the setting itself wins; export keeps the binding."""
+    write_ssd(tmp_path, annotations=BOUND.format(extra=""), wheelset=inline(real("alpha", 0.2)))
+    (tmp_path / "variants").mkdir()
+    (tmp_path / "variants" / "heavy.ssv").write_text(parameter_set("heavy", real("wheelset.m", 1500.0)))
+    s = read_system(tmp_path, fmu_dirs=[fmu_dir])
+    assert s.observers[0].settings == {"conicity": 0.2, "mass": 1109.0, "level": 1}  # binding, start, start
+    assert s.observers[0].setting_parameters == {"conicity": "wheelset.alpha", "mass": "wheelset.m",
+                                                 "level": "track.psd_level"}
+    s = read_system(tmp_path, variant="heavy", fmu_dirs=[fmu_dir],
+                    overrides={"wheelset": {"alpha": "0.3"}, "track": {"psd_level": "2"}})
+    assert s.observers[0].settings == {"conicity": 0.3, "mass": 1500.0, "level": 2}
+    s = read_system(tmp_path, variant="heavy", fmu_dirs=[fmu_dir], overrides={"o": {"mass": "7"}})
+    assert s.observers[0].settings["mass"] == 7 and "mass" not in s.observers[0].setting_parameters
+    archive = write_ssp(read_system(tmp_path, variant="heavy", fmu_dirs=[fmu_dir]), tmp_path / "bound.ssp")
+    again = read_system(archive, overrides={"wheelset": {"m": "1600"}})
+    assert again.observers[0].settings == {"conicity": 0.2, "mass": 1600.0, "level": 1}
+    for bad, expected in (
+            ('<rf:Setting name="k" parameter="bogie.m"/>', "Setting 'k': parameter 'bogie.m': no component 'bogie'"),
+            ('<rf:Setting name="k" parameter="wheelset.mass"/>',
+             "Setting 'k': parameter 'wheelset.mass': WheelsetLateral.fmu has no variable 'mass'"),
+            ('<rf:Setting name="k" parameter="wheelset.ddy"/>',
+             "Setting 'k': parameter 'wheelset.ddy' is a(n) output, not a parameter"),
+            ('<rf:Setting name="k" parameter="wheelset.m" value="1"/>',
+             "Setting 'k': give one of value, connector or parameter, not value and parameter")):
+        write_ssd(tmp_path, annotations=BOUND.format(extra=bad))
+        assert expected in user_error(read_system, tmp_path, fmu_dirs=[fmu_dir])
+
+
+def test_an_observer_is_switched_off_by_enabled(fmu_dir, tmp_path):
+    """The reserved setting `enabled`: a Boolean, false from the SSD, a variant or --set."""
+    write_ssd(tmp_path, annotations=BOUND.format(extra=""))
+    assert read_system(tmp_path, fmu_dirs=[fmu_dir]).observers[0].enabled
+    s = read_system(tmp_path, fmu_dirs=[fmu_dir], overrides={"o": {"enabled": "false"}})
+    assert not s.observers[0].enabled and "enabled" not in s.observers[0].class_settings
+    write_ssd(tmp_path, annotations=BOUND.format(extra='<rf:Setting name="enabled" value="false"/>'))
+    assert not read_system(tmp_path, fmu_dirs=[fmu_dir]).observers[0].enabled
+    assert read_system(tmp_path, fmu_dirs=[fmu_dir], overrides={"o": {"enabled": "true"}}).observers[0].enabled
+    assert "Observer 'o': setting enabled='no' must be true or false" in user_error(
+        read_system, tmp_path, fmu_dirs=[fmu_dir], overrides={"o": {"enabled": "no"}})
+
+
+MASTER = ('<ssd:Annotations><ssc:Annotation type="org.railfmu.experiment"><rf:FixedStep stepSize="0.001" '
+          'master="{name}"/></ssc:Annotation></ssd:Annotations>')
+
+
+def test_experiment_prefers_a_master(fmu_dir, tmp_path):
+    write_ssd(tmp_path)
+    assert read_system(tmp_path, fmu_dirs=[fmu_dir]).master is None
+    (tmp_path / "SystemStructure.ssd").write_text(
+        ssd_text(step="").replace("</ssd:DefaultExperiment>", MASTER.format(name="container") + "</ssd:DefaultExperiment>"))
+    s = read_system(tmp_path, fmu_dirs=[fmu_dir])
+    assert s.master == "container" and s.step_size == 0.001
+    assert read_system(write_ssp(s, tmp_path / "m.ssp")).master == "container"  # export keeps it
+    (tmp_path / "SystemStructure.ssd").write_text(
+        ssd_text(step="").replace("</ssd:DefaultExperiment>", MASTER.format(name="euler") + "</ssd:DefaultExperiment>"))
+    assert "FixedStep master='euler': choose one of jacobi, gauss-seidel, container" in user_error(
+        read_system, tmp_path, fmu_dirs=[fmu_dir])
+
+
+def test_a_variant_sets_the_stop_time(fmu_dir, tmp_path):
+    """The reserved variant name experiment.stopTime (s) < --set experiment.stopTime < --stop-time."""
+    write_ssd(tmp_path, stop="2", step="0.01")
+    (tmp_path / "variants").mkdir()
+    (tmp_path / "variants" / "short.ssv").write_text(parameter_set("short", real("experiment.stopTime", 0.5, "s")))
+    (tmp_path / "variants" / "bad.ssv").write_text(parameter_set("bad", real("experiment.stopTime", 500, "ms")))
+    s = read_system(tmp_path, fmu_dirs=[fmu_dir])
+    assert (s.stop_time, s.stop_time_from) == (2.0, "ssd:DefaultExperiment")
+    s = read_system(tmp_path, variant="short", fmu_dirs=[fmu_dir])
+    assert (s.stop_time, s.stop_time_from) == (0.5, "variant short (experiment.stopTime)")
+    assert s.n_steps == 50
+    s = read_system(tmp_path, variant="short", fmu_dirs=[fmu_dir], overrides={"experiment": {"stopTime": "0.7"}})
+    assert (s.stop_time, s.stop_time_from) == (0.7, "--set (experiment.stopTime)")
+    s = read_system(tmp_path, variant="short", fmu_dirs=[fmu_dir], stop_time=1.5)
+    assert (s.stop_time, s.stop_time_from) == (1.5, "--stop-time")
+    assert "experiment.stopTime is in s, not 'ms'" in user_error(read_system, tmp_path, variant="bad",
+                                                                 fmu_dirs=[fmu_dir])
+    assert "--set experiment.stopTime: experiment.stopTime 'soon' must be a number of seconds" in user_error(
+        read_system, tmp_path, fmu_dirs=[fmu_dir], overrides={"experiment": {"stopTime": "soon"}})
+    assert "does not divide" in user_error(read_system, tmp_path, fmu_dirs=[fmu_dir],
+                                           overrides={"experiment": {"stopTime": "0.555"}})

@@ -1,4 +1,4 @@
-"""Trolley survey (Jiang et al. 2017), free-inertial: a pushed trolley's IMU through an IMU grade into a strapdown INS.
+"""Trolley survey (Jiang et al. 2017): a pushed trolley's IMU through an IMU grade into a free-inertial INS and a ZUPT-aided smoother.
 
 The system is ``SystemStructure.ssd``: the ``Trolley`` FMU is pushed along 600 m of curved,
 graded track with ERRI B176 alignment and level irregularities, stopping every 60 m, and
@@ -6,9 +6,22 @@ gives the ideal IMU increments over each 5 ms step (200 Hz) and its true navigat
 the ``ImuErrors`` FMU adds the errors of one IMU grade; the observer ``ins``
 (:class:`estimators.ins_observer.StrapdownINS`) integrates the measured increments from the
 trolley's state at the first sample (its settings are bound to the trolley's outputs) and is
-scored against the trolley's state. Variants swap the grade: ``ideal_imu`` (the numerical
+scored against the trolley's state. The offline observer ``smoother``
+(:class:`estimators.aided_ins.AidedInsSmoother`: error-state Kalman filter with feedback and
+RTS smoother) runs on the whole record after the run with ZUPTs from the trolley's
+``stopped`` flag (optionally NHC, odometer, landmark fixes), its initial attitude and
+velocity errors drawn per run (SensorNoise ``initial_errors``: 0.006°, 0.006°, 0.06°, 1e-4
+m/s; the initial position error is not drawn, a common offset does not change a chord), its
+noise model the selected grade (settings bound to ``imu.*``). Its accuracy on 30 m chords is
+:mod:`experiments.trolley_survey.survey_accuracy`.
+
+Variants (written by :mod:`experiments.trolley_survey.variants`): ``ideal_imu`` (the numerical
 floor: the data and the INS are exact to < 0.01 mm and 1e-6 rad), ``navigation_grade`` (the
-paper's IMU), ``tactical_grade``, ``mems_grade``.
+paper's IMU), ``tactical_grade``, ``mems_grade``; ``paper_montecarlo`` (the paper's 30 m
+simulation; ``railfmu study trolley_survey --variant paper_montecarlo --runs 500``);
+``zupt_60m``, ``zupt_nhc``, ``zupt_odometer``, ``zupt_nhc_odometer``, ``landmarks``, each also
+``_tactical`` and ``_mems``. The experiment runs on the container master unless ``--master``
+says otherwise (its SSD's ``rf:FixedStep master``).
 
 Every run writes, besides ``signals.csv``, the two standard files (documented here, read by
 :func:`estimators.ins_observer.read_imu_csv` and by the ``trolley_imu_replay`` experiment):
@@ -22,7 +35,12 @@ Every run writes, besides ``signals.csv``, the two standard files (documented he
 
 Floats are written with ``repr`` (they read back to the same double).
 
-Metrics (``metrics.json``), the INS against the trolley over the run: ``ins_position_error_max_mm``
+Metrics (``metrics.json``): with the smoother, those of
+:mod:`experiments.trolley_survey.survey_accuracy` (``chord_alignment_max_error_mm``,
+``chord_level_max_error_mm``, ``chord_alignment_rms_error_mm``, ``chord_level_rms_error_mm``,
+``predicted_sigma_alignment_mm``, ``predicted_sigma_level_mm``, ``filter_seconds``,
+``smoother_seconds``). With the INS (not switched off by ``ins.enabled=false``), the INS
+against the trolley over the run: ``ins_position_error_max_mm``
 (the largest 3-D position error), ``ins_velocity_error_max_mm_s`` (the largest 3-D velocity
 error), ``ins_attitude_error_max_deg`` (the largest rotation angle between the INS's and the
 true attitude), each also as the largest up to 30 s and 60 s after the start of motion
@@ -67,6 +85,16 @@ def metric_name(kind: str, suffix: str = "") -> str:
     return f"ins_{kind}_error_max_{UNITS[kind]}{suffix}"
 
 
+def position_errors(est: np.ndarray, true: np.ndarray) -> np.ndarray:
+    """Estimate minus truth of rows of :data:`NAV` (or of latitude, longitude, height): (n, 3)
+    NED in m, the latitude and longitude differences times the local radii plus height."""
+    from models import earth
+
+    rn, re = earth.principal_radii(true[:, 0], true[:, 2])
+    return np.stack([(est[:, 0] - true[:, 0]) * rn, (est[:, 1] - true[:, 1]) * re * np.cos(true[:, 0]),
+                     -(est[:, 2] - true[:, 2])], axis=1)
+
+
 def navigation_errors(est: np.ndarray, true: np.ndarray) -> dict[str, np.ndarray]:
     """INS minus truth, rows of :data:`NAV` (rad, m, m/s): ``position`` (n, 3) NED in m (the
     latitude and longitude differences times the local radii plus height), ``velocity``
@@ -75,11 +103,8 @@ def navigation_errors(est: np.ndarray, true: np.ndarray) -> dict[str, np.ndarray
     from scipy.spatial.transform import Rotation
 
     from estimators.attitude import dcm_from_rph
-    from models import earth
 
-    rn, re = earth.principal_radii(true[:, 0], true[:, 2])
-    position = np.stack([(est[:, 0] - true[:, 0]) * rn, (est[:, 1] - true[:, 1]) * re * np.cos(true[:, 0]),
-                         -(est[:, 2] - true[:, 2])], axis=1)
+    position = position_errors(est, true)
     C = dcm_from_rph(*est[:, 6:9].T) @ np.swapaxes(dcm_from_rph(*true[:, 6:9].T), 1, 2)
     return {"position": position, "velocity": est[:, 3:6] - true[:, 3:6],
             "attitude": Rotation.from_matrix(C).as_rotvec()}
@@ -162,23 +187,130 @@ def track_geometry(roles: dict):
     return TrackGeometry(params, table, DEFAULT_TRACK.parent)
 
 
+def _has_ins(run: RunData) -> bool:
+    return "ins.latitude" in run.estimates
+
+
+_LAST_SURVEY: list = [None, None]  # (key, SurveyRun) of the last run: metrics, series, figures share it
+
+
+def _survey(run: RunData):
+    """The run's chord accuracy (:class:`survey_accuracy.SurveyRun`), None without the smoother;
+    built once per run (the runner hands metrics, series and figures the same signals and
+    observer objects in fresh RunData)."""
+    from .survey_accuracy import SMOOTHER, SurveyRun
+
+    obs = run.observers.get(SMOOTHER)
+    if obs is None:
+        return None
+    key = (id(run.signals), id(obs))
+    if _LAST_SURVEY[0] != key:
+        _LAST_SURVEY[:] = [key, SurveyRun(run, position_errors)]
+    return _LAST_SURVEY[1]
+
+
 class TrolleySurvey(Study):
-    """The free-inertial trolley survey: INS errors per IMU grade, and the standard files."""
+    """The trolley survey: INS errors per IMU grade, the aided smoother's chord accuracy, and
+    the standard files."""
     default_variant = "ideal_imu"
     roles = ROLES
     figures_of_signals: dict = {}  # not every recorded signal over 140,000 rows: the figures below
-    summary_metrics = tuple(metric_name(k, s) for k in ERRORS for s in ("", "_30s", "_60s")) + ("wall_time_s",)
+    summary_metrics = (("chord_*_error_mm", "predicted_sigma_*_mm", "filter_seconds", "smoother_seconds")
+                       + tuple(metric_name(k, s) for k in ERRORS for s in ("", "_30s", "_60s"))
+                       + ("wall_time_s", "timing_s.*", "observers.smoother.wall_time_s"))
 
     def metrics(self, run: RunData) -> dict:
-        t, est, true = _arrays(run)
-        return error_metrics(t, navigation_errors(est, true), _motion_start(run))
+        out: dict = {}
+        sr = _survey(run)
+        if sr is not None:
+            out.update(sr.metrics())
+        if _has_ins(run):
+            t, est, true = _arrays(run)
+            out.update(error_metrics(t, navigation_errors(est, true), _motion_start(run)))
+        return out
+
+    def series(self, run: RunData) -> dict[str, np.ndarray]:
+        sr = _survey(run)
+        return sr.series() if sr is not None else {}
+
+    def summary_md(self, summary: dict[str, dict[str, dict]], runs: int) -> str:
+        from .survey_accuracy import aiding_rows, montecarlo_rows
+
+        L = montecarlo_rows(summary)
+        values = {v: (st["chord_alignment_max_error_mm"]["rms"], st["chord_level_max_error_mm"]["rms"])
+                  for v, st in summary.items() if "chord_alignment_max_error_mm" in st}
+        aid = aiding_rows(values, f"RMS over {runs} runs of the max |chord error| per run")
+        return "\n".join([*L, "", *aid, "", super().summary_md(summary, runs)]).strip()
+
+    def study_tables(self, table: dict, series: dict) -> str:
+        from .survey_accuracy import repeatability, repeatability_rows
+
+        L = []
+        for v, runs in series.items():
+            rows = repeatability(runs)
+            if rows:
+                table[v]["repeatability"] = rows  # into table.json too
+                L += repeatability_rows(v, rows)
+        return "\n".join(L).strip()
+
+    def study_figures(self, table: dict, series: dict, out: Path) -> list[str]:
+        """``max_error_histograms.png`` (Fig. 12) and, per variant with chords, the first chord's
+        estimates over the runs (``repeatability_<variant>.png``, Fig. 15)."""
+        from .survey_accuracy import histogram_figure, repeatability_figure
+
+        files = [f for f in [histogram_figure(out, table)] if f]
+        for v, runs in series.items():
+            first = next(iter(table[v]["runs"].values()), {})
+            truth = None
+            try:
+                from models.track_geometry import chord_irregularity
+                track = track_geometry(first.get("roles", {}))
+                s = np.arange(0.0, 25.0 + 1e-9, 0.5)
+                truth = (s, *chord_irregularity(track.rail_positions, track.design_positions, s, 0.0))
+            except (KeyError, UserError, ValueError, OSError):  # the figure shows the errors alone
+                truth = None
+            f = repeatability_figure(out, v, runs, truth)
+            if f:
+                files.append(f)
+        return files
 
     def files(self, run: RunData, out: Path) -> list[str]:
         return write_standard_files(run, out)
 
     def figures(self, run: RunData, out: Path) -> list[str]:
         """``track.png`` (plan, profile, irregularities), ``speed.png`` (speed and stops),
-        ``ins_errors.png`` (position N/E/D, velocity, attitude over time)."""
+        ``ins_errors.png`` (position N/E/D, velocity, attitude over time) with the INS; with
+        the smoother ``chord_irregularity.png`` (Figs. 12/14), ``trajectory_3d.png`` (Fig. 14c),
+        ``smoother_errors.png``, and for ``paper_montecarlo`` the sensitivity curves (Figs. 8-11)."""
+        files = self._track_figures(run, out)
+        if _has_ins(run):
+            t, est, true = _arrays(run)
+            files.append(ins_error_figure(out, "Free-inertial INS errors (INS minus truth)", t, est, true))
+        sr = _survey(run)
+        if sr is not None:
+            from experiments.plots import figure
+
+            from .survey_accuracy import irregularity_figure, sensitivity_figures, trajectory_figure
+
+            files.append(figure(out, "smoother_errors.png", "Smoothed position error and its predicted sigma",
+                                sr.t, "time [s]",
+                                [[(f"error {c}", 1e3 * sr.error[:, j], "mm"),
+                                  (f"+σ {c}", 1e3 * sr.sigma[:, j], "mm", {"ls": "--", "lw": 0.7}),
+                                  (f"-σ {c}", -1e3 * sr.sigma[:, j], "mm", {"ls": "--", "lw": 0.7})]
+                                 for j, c in enumerate("NED")]))
+            files.append(trajectory_figure(out, sr))
+            if sr.grid is not None:
+                try:
+                    track = track_geometry(run.roles)
+                    files.append(irregularity_figure(out, sr, track, f"{run.base['variant']}: 30 m chord "
+                                                     "irregularity, estimated and true"))
+                except (UserError, ValueError, OSError):
+                    pass  # a track table the twin cannot read: no truth to draw
+            if run.base.get("variant") == "paper_montecarlo":
+                files += sensitivity_figures(out)
+        return files
+
+    def _track_figures(self, run: RunData, out: Path) -> list[str]:
         from experiments.plots import _pyplot, figure
 
         s, r = run.signals, run.roles
@@ -213,12 +345,27 @@ class TrolleySurvey(Study):
                             [[("speed along the track", np.asarray(s[r["true_speed_along"]]), "m/s")],
                              [("stopped", np.asarray(s[r["true_stopped"]]), "0/1")],
                              [("distance", dist, "m")]]))
-        t, est, true = _arrays(run)
-        files.append(ins_error_figure(out, "Free-inertial INS errors (INS minus truth)", t, est, true))
         return files
 
     def report_md(self, metrics: dict) -> str:
-        L = ["## Free-inertial INS against the trolley's truth", "",
+        L = []
+        if "chord_alignment_max_error_mm" in metrics:
+            m = metrics
+            L += ["## Aided survey: 30 m chord irregularity errors of the smoothed trajectory", "",
+                  f"{m['chords_surveyed']} chords, {m['chord_points']} points (0.5 m apart, 5 m offset).", "",
+                  "| | alignment [mm] | level [mm] |", "|---|---|---|",
+                  f"| max \\|error\\| | {m['chord_alignment_max_error_mm']:.3f} | {m['chord_level_max_error_mm']:.3f} |",
+                  f"| rms error | {m['chord_alignment_rms_error_mm']:.3f} | {m['chord_level_rms_error_mm']:.3f} |",
+                  f"| predicted RMS over runs of the max (smoother's joint covariance) | "
+                  f"{m['predicted_sigma_alignment_mm']:.3f} | {m['predicted_sigma_level_mm']:.3f} |", "",
+                  f"Filter {m['filter_seconds']:.3f} s, smoother {m['smoother_seconds']:.3f} s (its INS "
+                  f"{m['observers']['smoother'].get('strapdown_seconds', 0.0):.3f} s).", ""]
+        elif "filter_seconds" in metrics:
+            L += ["## Aided survey", "", "The run surveys no whole 30 m chord: no chord errors.", ""]
+        if metric_name("position") not in metrics:
+            return "\n".join(L + ["The IMU data and the truth are in imu.csv and truth.csv (the standard form).", "",
+                                  observers_md(metrics)])
+        L += ["## Free-inertial INS against the trolley's truth", "",
              f"Motion starts at {metrics['motion_start_s']:g} s; 'up to 30 s / 60 s' is the largest error from "
              "the start to that long after the start of motion.", "",
              "| error | whole run | up to 30 s | up to 60 s | final |", "|---|---|---|---|---|"]
@@ -231,12 +378,32 @@ class TrolleySurvey(Study):
         return "\n".join(L)
 
     def table_md(self, table: dict[str, dict]) -> str:
-        L = ["| variant | position [mm] | at 30 s | at 60 s | velocity [mm/s] | at 30 s | at 60 s | "
-             "attitude [deg] | at 30 s | at 60 s | wall [s] |", "|---|" + "---|" * 10]
-        for variant, m in table.items():
-            cells = " | ".join(f"{m[metric_name(k, s)]:.4g}" for k in ERRORS for s in ("", "_30s", "_60s"))
-            L.append(f"| {variant} | {cells} | {m['wall_time_s']:.2f} |")
-        return "\n".join(L + ["", "Largest error over the run, and up to 30 s and 60 s after the start of motion."])
+        """The aiding table (what each aiding buys, per grade), the chord errors of every
+        variant with the smoother, and the free-inertial INS errors of those with the INS."""
+        from .survey_accuracy import aiding_rows
+
+        L = []
+        chords = {v: m for v, m in table.items() if "chord_alignment_max_error_mm" in m}
+        if chords:
+            L += aiding_rows({v: (m["chord_alignment_max_error_mm"], m["chord_level_max_error_mm"])
+                              for v, m in chords.items()}, "max |chord error| of one run")
+            L += ["", "| variant | alignment max [mm] | level max [mm] | alignment rms | level rms | predicted "
+                  "alignment | predicted level | filter [s] | smoother [s] |", "|---|" + "---|" * 8]
+            for v, m in chords.items():
+                L.append(f"| {v} | " + " | ".join(f"{m[k]:.3f}" for k in (
+                    "chord_alignment_max_error_mm", "chord_level_max_error_mm", "chord_alignment_rms_error_mm",
+                    "chord_level_rms_error_mm", "predicted_sigma_alignment_mm", "predicted_sigma_level_mm",
+                    "filter_seconds", "smoother_seconds")) + " |")
+            L += ["", "Predicted: the RMS over runs of the max |chord error| from the smoother's joint covariance.", ""]
+        ins = {v: m for v, m in table.items() if metric_name("position") in m}
+        if ins:
+            L += ["| variant | position [mm] | at 30 s | at 60 s | velocity [mm/s] | at 30 s | at 60 s | "
+                  "attitude [deg] | at 30 s | at 60 s | wall [s] |", "|---|" + "---|" * 10]
+            for variant, m in ins.items():
+                cells = " | ".join(f"{m[metric_name(k, s)]:.4g}" for k in ERRORS for s in ("", "_30s", "_60s"))
+                L.append(f"| {variant} | {cells} | {m['wall_time_s']:.2f} |")
+            L += ["", "Free-inertial INS: largest error over the run, and up to 30 s and 60 s after the start of motion."]
+        return "\n".join(L).strip()
 
 
 STUDY = TrolleySurvey(__doc__.strip().splitlines()[0])

@@ -27,6 +27,7 @@ from ..errors import UserError
 
 Value = float | int | bool | str
 SIGNAL_TYPES = ("Real", "Integer", "Boolean")  # what a connection carries and signals.csv records
+RESERVED_SETTINGS = ("enabled",)  # observer settings the platform reads, not the estimator class
 
 
 @dataclass
@@ -86,7 +87,12 @@ class ObserverSpec:
     ``truth`` maps estimate names to the recorded signals they are scored against (metrics
     only, never fed to the estimator); ``settings`` are keyword arguments of the class;
     ``setting_signals`` maps a setting to the recorded signal whose value at the observer's
-    first sample it takes (converted to the unit the observer declares for that name).
+    first sample it takes (converted to the unit the observer declares for that name);
+    ``setting_parameters`` maps a setting to the component parameter ``component.parameter``
+    whose value (as the SSP binds it after the variant and ``--set``, else the FMU's start
+    value, in the FMU's unit) the reader has put into ``settings`` (an estimator's noise model
+    following the IMU grade a variant selects). The reserved setting ``enabled`` (default
+    true) is not passed to the class: false leaves the observer out of the run.
     ``period``: its sample period in s (None: the system's step); ``event``: its
     measurements arrive as events (None: as its class declares); ``offline``: run once on
     the whole record after the run. ``units``: the unit of each bound signal that has one
@@ -99,11 +105,22 @@ class ObserverSpec:
     truth: dict[str, str] = field(default_factory=dict)
     settings: dict[str, Value] = field(default_factory=dict)
     setting_signals: dict[str, str] = field(default_factory=dict)
+    setting_parameters: dict[str, str] = field(default_factory=dict)
     valid: dict[str, str] = field(default_factory=dict)
     period: float | None = None
     event: bool | None = None
     offline: bool = False
     units: dict[str, object] = field(default_factory=dict)
+
+    @property
+    def enabled(self) -> bool:
+        """False when the setting ``enabled`` is false: the bank does not build it."""
+        return self.settings.get("enabled", True) is not False
+
+    @property
+    def class_settings(self) -> dict[str, Value]:
+        """The settings passed to the estimator class (without the reserved ones)."""
+        return {k: v for k, v in self.settings.items() if k not in RESERVED_SETTINGS}
 
     @property
     def signals(self) -> list[str]:
@@ -126,6 +143,8 @@ class System:
     description: str = ""
     warnings: list[str] = field(default_factory=list)  # e.g. an unconnected input keeping its start
     step_size_from: str = "given"  # where the step size came from (annotation, --step-size, the FMUs)
+    master: str | None = None  # the master the experiment prefers (rf:FixedStep master=); None: the caller's
+    stop_time_from: str = "given"  # where the stop time came from (--stop-time, the variant, the SSD)
 
     def component(self, name: str) -> Component:
         for c in self.components:

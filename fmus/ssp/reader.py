@@ -12,6 +12,13 @@ values, lowest priority first:
 A String value ``resources/...`` (from any of them) names a file of the SSP and is passed to
 the FMU as an absolute path (:meth:`_Reader._resource`).
 
+The experiment (our ``org.railfmu.experiment`` annotation on ``ssd:DefaultExperiment``) may
+name the fixed-step master it runs best on, ``<rf:FixedStep stepSize="0.005"
+master="container"/>`` (``System.master``: used when the command line names none; an
+ssc:Annotation holds one element, so the master is an attribute of the step's). A variant may shorten or lengthen the run with the
+reserved parameter name ``experiment.stopTime`` (s; also ``--set experiment.stopTime=T``);
+``--stop-time`` still wins. Other tools ignore both (an SSD annotation; a variant is ours).
+
 Every problem a user can cause is a one-line :class:`UserError` naming the file (with its
 line), the element and what is wrong; the system read is checked as every master checks it
 (:func:`fmus.cosim.system.check_system`), so ``railfmu validate`` reports what a run would
@@ -86,6 +93,8 @@ RESOURCES = "resources/"  # SSP 1.0: an SSP's own files (FMUs, and any file a pa
 PARAMETERS = "org.railfmu.parameters"
 RECORDER, OBSERVERS, EXPERIMENT, OSP = ("org.railfmu.recorder", "org.railfmu.observers",
                                         "org.railfmu.experiment", "com.opensimulationplatform")
+#: reserved name of a variant parameter (or ``--set``) giving the run's stop time in s
+STOP_TIME = "experiment.stopTime"
 
 
 def read_system(path, variant: str | None = None, fmu_dirs=(), overrides: dict[str, dict[str, object]] | None = None,
@@ -179,6 +188,7 @@ class _Reader:
         self.comps: dict[str, _Comp] = {}
         self._mds: dict[Path, object] = {}
         self.aliases: dict[str, tuple[list[tuple[str, str, str]], str]] = {}
+        self.stop_time: tuple[float, str] | None = None  # (s, where) from experiment.stopTime
 
     def at(self, el) -> str:
         return f"{self.file}:{el.sourceline}"
@@ -200,6 +210,8 @@ class _Reader:
         if variant is not None:
             self._variant(variant)
         self._overrides(overrides)
+        for spec in observers:  # after the variant and --set: the parameters' final values
+            self._setting_parameters(spec)
         start, stop, step = self._time(*times, need=need_time)
         system = System(name=self.doc.get("name") or self.system.get("name"),
                         components=[Component(c.name, c.fmu, dict(c.params), model=c.md)
@@ -207,7 +219,8 @@ class _Reader:
                         connections=connections, start_time=start, stop_time=stop, step_size=step,
                         record=record, observers=observers,
                         description=self.doc.get("description") or self.system.get("description") or "",
-                        warnings=self._unconnected(connections), step_size_from=self.step_from)
+                        warnings=self._unconnected(connections), step_size_from=self.step_from,
+                        master=self._master(), stop_time_from=self.stop_from)
         try:  # what every master checks, so that `railfmu validate` reports what a run would refuse
             check_system(system)
         except UserError as exc:
@@ -455,8 +468,27 @@ class _Reader:
             raise UserError(f"{file}: variant file not found")
         shown = self.root.show(file)
         for v in read_parameter_set(parse_checked(file, "ssv", shown), shown, self.ssd_units):
-            if not self._alias(v.name, v.value, v.where) and not self._observer_setting(v.name, v.value, v.where):
+            if (not self._stop_time(v.name, v.value, v.where, f"variant {Path(variant).stem}", v.unit)
+                    and not self._alias(v.name, v.value, v.where)
+                    and not self._observer_setting(v.name, v.value, v.where)):
                 self._set(*self._split(v))
+
+    def _stop_time(self, name: str, value, where: str, label: str, unit: str | None = None) -> bool:
+        """The reserved name ``experiment.stopTime`` (:data:`STOP_TIME`; unless a component or
+        observer is called ``experiment``): the run's stop time in s. False for other names."""
+        group = STOP_TIME.partition(".")[0]
+        if name != STOP_TIME or group in self.comps or group in self.observers:
+            return False
+        if unit not in (None, "s"):
+            raise UserError(f"{where}: {STOP_TIME} is in s, not {unit!r}")
+        try:
+            stop = float(value)
+        except (TypeError, ValueError):
+            stop = math.nan
+        if isinstance(value, bool) or not math.isfinite(stop):
+            raise UserError(f"{where}: {STOP_TIME} {value!r} must be a number of seconds")
+        self.stop_time = (stop, f"{label} ({STOP_TIME})")
+        return True
 
     def _observer_setting(self, name: str, value, where: str = "") -> bool:
         """Our extension: a variant or ``--set`` name ``observer.setting`` (an observer of the
@@ -478,6 +510,7 @@ class _Reader:
             return True
         spec.settings[setting] = _setting(str(value)) if isinstance(value, str) else value
         spec.setting_signals.pop(setting, None)  # a value given on purpose wins
+        spec.setting_parameters.pop(setting, None)
         return True
 
     def _aliases(self) -> dict[str, tuple[list[tuple[str, str, str]], str]]:
@@ -541,12 +574,14 @@ class _Reader:
                     value = str(path.resolve())
                 self.observers[owner].settings[param] = _setting(str(value)) if isinstance(value, str) else value
                 self.observers[owner].setting_signals.pop(param, None)
+                self.observers[owner].setting_parameters.pop(param, None)
         return True
 
     def _overrides(self, overrides: dict) -> None:
         for cname, values in overrides.items():
             values = {k: v for k, v in values.items()
-                      if not self._alias(f"{cname}.{k}", v, f"--set {cname}.{k}")
+                      if not self._stop_time(f"{cname}.{k}", v, f"--set {cname}.{k}", "--set")
+                      and not self._alias(f"{cname}.{k}", v, f"--set {cname}.{k}")
                       and not self._observer_setting(f"{cname}.{k}", v, f"--set {cname}.{k}")}
             if not values:
                 continue
@@ -565,6 +600,9 @@ class _Reader:
         our annotation or the OSP one on ssd:DefaultExperiment, else the smallest
         DefaultExperiment stepSize of the components' FMUs."""
         self.step_from = "--step-size" if step is not None else ""
+        self.stop_from = "--stop-time" if stop is not None else "ssd:DefaultExperiment"
+        if stop is None and self.stop_time is not None:
+            stop, self.stop_from = self.stop_time
         de = self.doc.find("ssd:DefaultExperiment", NS)
         if de is not None:
             start = start if start is not None else self._number(de, "startTime")
@@ -587,11 +625,26 @@ class _Reader:
         n_steps(start, stop, step, self.file)
         return start, stop, step
 
+    def _master(self) -> str | None:
+        """The master the experiment prefers: ``<rf:FixedStep master="container"/>`` in our
+        annotation on ssd:DefaultExperiment (a one-line error for a master railfmu lacks)."""
+        de = self.doc.find("ssd:DefaultExperiment", NS)
+        a = self._annotation(de, EXPERIMENT) if de is not None else None
+        el = a.find("rf:FixedStep", NS) if a is not None else None
+        if el is None or el.get("master") is None:
+            return None
+        from ..cosim.masters import MASTERS
+
+        name = el.get("master")
+        if name not in MASTERS:
+            raise UserError(f"{self.at(el)}: FixedStep master={name!r}: choose one of {', '.join(MASTERS)}")
+        return name
+
     def _step(self, de) -> tuple[float | None, str]:
         """Our rf:FixedStep, else libcosim's osp:FixedStepAlgorithm."""
         a = self._annotation(de, EXPERIMENT)
         fs = a.find("rf:FixedStep", NS) if a is not None else None
-        if fs is not None:
+        if fs is not None and fs.get("stepSize") is not None:  # it may name just the master
             return self._number(fs, "stepSize"), f"the {EXPERIMENT} annotation"
         a = self._annotation(de, OSP)
         fs = a.find("osp:Algorithm/osp:FixedStepAlgorithm", NS) if a is not None else None
@@ -691,22 +744,57 @@ class _Reader:
                 flag = self._signal(e, f"{self.at(e)}: Observer {name!r} Measurement {k!r} valid",
                                     attr="valid")
                 valid[k] = flag
-        settings, setting_signals = {}, {}
+        settings, setting_signals, setting_parameters = {}, {}, {}
         for k, e in named("Setting").items():
-            if e.get("connector") is None:
-                settings[k] = _setting(e.get("value", ""))
-            elif e.get("value") is not None:
-                raise UserError(f"{self.at(e)}: Observer {name!r} Setting {k!r}: give a value or a connector, "
-                                "not both")
-            else:  # the signal's value at the observer's first sample (an initial state)
+            given = [a for a in ("value", "connector", "parameter") if e.get(a) is not None]
+            if len(given) > 1:
+                raise UserError(f"{self.at(e)}: Observer {name!r} Setting {k!r}: give one of value, connector "
+                                f"or parameter, not {' and '.join(given)}")
+            if e.get("connector") is not None:  # the signal's value at the observer's first sample
                 setting_signals[k] = self._signal(e, f"{self.at(e)}: Observer {name!r} Setting {k!r}")
+            elif e.get("parameter") is not None:  # the parameter's final value (after variant, --set)
+                setting_parameters[k] = self._parameter_ref(e, f"{self.at(e)}: Observer {name!r} Setting {k!r}")
+            else:
+                settings[k] = _setting(e.get("value", ""))
         spec = ObserverSpec(
             name, cls, measurements=bound("Measurement"), inputs=bound("Input"), truth=bound("Truth"),
-            settings=settings, setting_signals=setting_signals,
+            settings=settings, setting_signals=setting_signals, setting_parameters=setting_parameters,
             valid=valid, period=period, event=None if sampling is None else sampling == "event",
             offline=offline == "true")
         spec.units = {sig: u for sig in spec.signals if (u := self._signal_unit(sig, where)) is not None}
         return spec
+
+    def _parameter_ref(self, el, where: str) -> str:
+        """``component.parameter`` of an ``rf:Setting parameter=``: a parameter of a component."""
+        ref = el.get("parameter")
+        for name in sorted(self.comps, key=len, reverse=True):
+            if ref.startswith(name + "."):
+                comp, param = self.comps[name], ref[len(name) + 1:]
+                var = comp.vars.get(param)
+                if var is None:
+                    raise UserError(f"{where}: parameter {ref!r}: {comp.fmu.name} has no variable {param!r}")
+                if var.causality != "parameter":
+                    raise UserError(f"{where}: parameter {ref!r} is a(n) {var.causality}, not a parameter")
+                return ref
+        raise UserError(f"{where}: parameter {ref!r}: no component {ref.partition('.')[0]!r}; {self.known()}")
+
+    def _setting_parameters(self, spec: ObserverSpec) -> None:
+        """Put each parameter-bound setting's value into ``spec.settings``: the parameter as the
+        SSP binds it (after the variant and ``--set``), else its FMU start value, in the FMU's
+        unit. Then the reserved setting ``enabled`` must be a Boolean."""
+        for k, ref in spec.setting_parameters.items():
+            name = next(n for n in sorted(self.comps, key=len, reverse=True) if ref.startswith(n + "."))
+            comp, param = self.comps[name], ref[len(name) + 1:]
+            if param in comp.params:
+                spec.settings[k] = comp.params[param]
+            else:
+                var = comp.vars[param]
+                convert = {"Real": float, "Integer": int, "Boolean": lambda x: str(x).lower() in ("true", "1"),
+                           "String": str}.get(var.type, str)
+                spec.settings[k] = convert(var.start) if var.start is not None else None
+        enabled = spec.settings.get("enabled", True)
+        if not isinstance(enabled, bool):
+            raise UserError(f"{self.file}: Observer {spec.name!r}: setting enabled={enabled!r} must be true or false")
 
     def _signal_unit(self, signal: str, where: str) -> Unit | None:
         """The unit of a recorded signal: its FMU variable's, else the one its SSD connector

@@ -251,7 +251,7 @@ def _experiment(doc, system: System) -> None:
     de = _sub(doc, "ssd:DefaultExperiment", startTime=_num(system.start_time), stopTime=_num(system.stop_time))
     annotations = _sub(de, "ssd:Annotations")
     a = _sub(annotations, "ssc:Annotation", type="org.railfmu.experiment")
-    _sub(a, "rf:FixedStep", stepSize=_num(system.step_size))
+    _sub(a, "rf:FixedStep", stepSize=_num(system.step_size), master=system.master)
     a = _sub(annotations, "ssc:Annotation", type="com.opensimulationplatform")  # what libcosim reads
     _sub(_sub(a, "osp:Algorithm"), "osp:FixedStepAlgorithm", baseStepSize=_num(system.step_size))
 
@@ -277,8 +277,11 @@ def _system_annotations(sys_el, system: System) -> None:
             for tag, table in (("rf:Measurement", o.measurements), ("rf:Input", o.inputs), ("rf:Truth", o.truth)):
                 for k, ref in table.items():
                     _sub(el, tag, name=k, connector=ref, valid=o.valid.get(k) if tag == "rf:Measurement" else None)
-            for k, v in o.settings.items():
-                _sub(el, "rf:Setting", name=k, value=str(v).lower() if isinstance(v, bool) else str(v))
+            for k, v in o.settings.items():  # a parameter-bound one stays bound (a --set on the archive moves it)
+                if k in o.setting_parameters:
+                    _sub(el, "rf:Setting", name=k, parameter=o.setting_parameters[k])
+                else:
+                    _sub(el, "rf:Setting", name=k, value=str(v).lower() if isinstance(v, bool) else str(v))
             for k, ref in o.setting_signals.items():
                 _sub(el, "rf:Setting", name=k, connector=ref)
     if system.record:

@@ -1,0 +1,139 @@
+"""Writes ``variants/*.ssv`` of the trolley survey: ``python -m experiments.trolley_survey.variants``.
+
+Every variant carries one whole IMU grade (the ``ImuErrors`` parameters of
+``parameters/imu_<grade>.ssv``, each as ``imu.<parameter>``; the smoother's noise model follows
+them through its settings bound to ``imu.*``) and, for the aided surveys, what the aiding
+changes in the trolley, the observers and the run:
+
+* the grade variants (``ideal_imu``, ``navigation_grade``, ``tactical_grade``, ``mems_grade``):
+  the 600 m survey as the SSD has it, free-inertial INS and ZUPT-aided smoother;
+* ``paper_montecarlo``: Jiang et al. (2017), §5's simulation: 30 m straight at N45°E
+  (``trolley_straight_30m.csv``), no irregularities, 1 m/s after a 1 s rest, one stop at the
+  end, the run ends 1 s after it (``experiment.stopTime`` = 36 s); one ZUPT per stop (at its
+  middle), the initial velocity sigma the ZUPT's; navigation grade; the INS off;
+* the aided 600 m surveys, navigation grade unless the name ends in ``_tactical`` or
+  ``_mems``: ``zupt_60m`` (ZUPT at the stops every 60 m), ``zupt_nhc`` (+ non-holonomic
+  constraint), ``zupt_odometer`` (+ odometer), ``zupt_nhc_odometer`` (+ both), ``landmarks``
+  (+ a position fix, 0.1 m, at every stop); all with the trolley wobbling off the rail (1 mm
+  lateral, 0.5 mm vertical, 2 m wavelength: a body velocity of up to 3.1 and 1.6 mm/s across
+  the rail at 1 m/s, rms 2.2 and 1.1 mm/s: the play the NHC's sigma of 3 mm/s covers) and an
+  odometer scale-factor error of 100 ppm (not a state of the filter: 0.1 mm/s at 1 m/s, under
+  its 1 mm/s sigma); the INS off. With the NHC or the odometer the smoother runs the 15-state
+  error model (``full15``: they observe the tilts, so the horizontal accelerometer biases can
+  no longer hide in them, and the 12-state model becomes overconfident in height;
+  ``estimators.aided_ins``).
+
+``tests/test_trolley_survey.py`` checks that the files are what this writes.
+"""
+
+from __future__ import annotations
+
+import sys
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+SSV = "http://ssp-standard.org/SSP1/SystemStructureParameterValues"
+GRADES = {  # variant suffix -> (parameters/imu_<file>.ssv, what it is)
+    "navigation": ("navigation_grade", "the navigation grade of Jiang et al. (2017), §3 (0.01 °/h, 0.005 °/√h, "
+                                       "50 µg, 10 µg/√Hz)"),
+    "tactical": ("tactical_grade", "a tactical grade (HG1700 class; sources in parameters/imu_tactical_grade.ssv)"),
+    "mems": ("mems_grade", "a MEMS grade (OpenIMU300ZA class; sources in parameters/imu_mems_grade.ssv)"),
+    "ideal": ("ideal", "the ideal IMU (no errors: the numerical floor)"),
+}
+GRADE_VARIANTS = {"ideal_imu": "ideal", "navigation_grade": "navigation", "tactical_grade": "tactical",
+                  "mems_grade": "mems"}
+
+#: the aided 600 m surveys: what every one of them changes, then each aiding's own settings
+AIDED_SURVEY = {"ins.enabled": False, "trolley.wobble_lateral": 0.001, "trolley.wobble_vertical": 0.0005,
+                "trolley.wobble_wavelength": 2.0, "trolley.odometer_scale_ppm": 100.0}
+AIDINGS = {
+    "zupt_60m": ("ZUPT at the stops every 60 m", {}),
+    "zupt_nhc": ("ZUPT + non-holonomic constraint", {"smoother.nhc": True, "smoother.nhc_sigma": 0.003,
+                                                     "smoother.error_model": "full15"}),
+    "zupt_odometer": ("ZUPT + odometer", {"smoother.odometer": True, "smoother.error_model": "full15"}),
+    "zupt_nhc_odometer": ("ZUPT + non-holonomic constraint + odometer",
+                          {"smoother.nhc": True, "smoother.nhc_sigma": 0.003, "smoother.odometer": True,
+                           "smoother.error_model": "full15"}),
+    "landmarks": ("ZUPT + a landmark position fix (0.1 m) at every stop", {"smoother.landmarks": True}),
+}
+PAPER_MONTECARLO = {
+    "trolley.track_file": "trolley_straight_30m.csv", "trolley.irregularity_level": 0,
+    "trolley.static_duration": 1.0, "trolley.stop_spacing": 30.0, "experiment.stopTime": 36.0,
+    "ins.enabled": False, "smoother.zupt_interval": "inf", "smoother.velocity_sigma": 0.0001,
+}
+
+
+def grade_parameters(grade: str) -> list[tuple[str, str, str, str | None]]:
+    """``(name, ssv type, value, unit)`` of ``parameters/imu_<grade>.ssv``, in file order."""
+    root = ET.parse(HERE / "parameters" / f"imu_{GRADES[grade][0]}.ssv").getroot()
+    out = []
+    for p in root.iterfind(f"{{{SSV}}}Parameters/{{{SSV}}}Parameter"):
+        typed = p[0]
+        out.append((p.get("name"), typed.tag.split("}")[1], typed.get("value"), typed.get("unit")))
+    return out
+
+
+def _typed(value) -> tuple[str, str]:
+    if isinstance(value, bool):
+        return "Boolean", str(value).lower()
+    if isinstance(value, int):
+        return "Integer", str(value)
+    if isinstance(value, float):
+        return "Real", repr(value)
+    return "String", str(value)
+
+
+def variant_text(name: str, grade: str, extra: dict, what: str) -> str:
+    """The ``.ssv`` of one variant: the grade's parameters as ``imu.*``, then ``extra``."""
+    lines = ['<?xml version="1.0" encoding="UTF-8"?>',
+             f"<!-- {what}, with {GRADES[grade][1]}.",
+             f"     Written by experiments/trolley_survey/variants.py (the ImuErrors parameters of "
+             f"parameters/imu_{GRADES[grade][0]}.ssv",
+             "     as imu.<parameter>, then the variant's own; tests/test_trolley_survey.py checks them). -->",
+             f'<ssv:ParameterSet version="1.0" name="{name}" xmlns:ssv="{SSV}">', "  <ssv:Parameters>"]
+    has_unit = False
+    for pname, kind, value, unit in grade_parameters(grade):
+        u = f' unit="{unit}"' if unit else ""
+        has_unit |= bool(unit)
+        lines.append(f'    <ssv:Parameter name="imu.{pname}"><ssv:{kind} value="{value}"{u}/></ssv:Parameter>')
+    for pname, value in extra.items():
+        kind, text = _typed(value)
+        lines.append(f'    <ssv:Parameter name="{pname}"><ssv:{kind} value="{text}"/></ssv:Parameter>')
+    lines.append("  </ssv:Parameters>")
+    if has_unit:
+        lines += ["  <ssv:Units>", '    <ssc:Unit name="s" xmlns:ssc="http://ssp-standard.org/SSP1/SystemStructureCommon">'
+                  '<ssc:BaseUnit s="1"/></ssc:Unit>', "  </ssv:Units>"]
+    lines.append("</ssv:ParameterSet>")
+    return "\n".join(lines) + "\n"
+
+
+def variants() -> dict[str, str]:
+    """``{variant: .ssv text}`` of every variant (module docstring)."""
+    out = {}
+    for name, grade in GRADE_VARIANTS.items():
+        out[name] = variant_text(name, grade, {}, "The 600 m survey (free-inertial INS and ZUPT-aided smoother)")
+    out["paper_montecarlo"] = variant_text(
+        "paper_montecarlo", "navigation", PAPER_MONTECARLO,
+        "Jiang et al. (2017), §5's Monte Carlo run: 30 m straight at N45°E, 1 m/s, ZUPT at both ends")
+    for aiding, (what, settings) in AIDINGS.items():
+        for suffix in ("navigation", "tactical", "mems"):
+            name = aiding if suffix == "navigation" else f"{aiding}_{suffix}"
+            out[name] = variant_text(name, suffix, {**AIDED_SURVEY, **settings},
+                                     f"The 600 m survey, {what}")
+    return out
+
+
+def main(folder: Path = HERE / "variants") -> list[Path]:
+    folder.mkdir(exist_ok=True)
+    written = []
+    for name, text in variants().items():
+        path = folder / f"{name}.ssv"
+        path.write_text(text)
+        written.append(path)
+    return written
+
+
+if __name__ == "__main__":
+    for p in main(Path(sys.argv[1]) if len(sys.argv) > 1 else HERE / "variants"):
+        print(p)
