@@ -9,8 +9,10 @@ changes in the trolley, the observers and the run:
   the 600 m survey as the SSD has it, free-inertial INS and ZUPT-aided smoother;
 * ``paper_montecarlo``: Jiang et al. (2017), §5's simulation: 30 m straight at N45°E
   (``trolley_straight_30m.csv``), no irregularities, 1 m/s after a 1 s rest, one stop at the
-  end, the run ends 1 s after it (``experiment.stopTime`` = 36 s); one ZUPT per stop (at its
-  middle), the initial velocity sigma the ZUPT's; navigation grade; the INS off;
+  end, the run ends 1 s after it (``experiment.stopTime`` = 36 s); one ZUPT per stop (at the
+  epoch next to the motion), the initial velocity sigma the ZUPT's; navigation grade with the
+  paper's "piecewise constant" biases (§2: a turn-on bias per run of 0.01 deg/h and 50 ug, no
+  in-run drift); the INS off;
 * the aided 600 m surveys, navigation grade unless the name ends in ``_tactical`` or
   ``_mems``: ``zupt_60m`` (ZUPT at the stops every 60 m), ``zupt_nhc`` (+ non-holonomic
   constraint), ``zupt_odometer`` (+ odometer), ``zupt_nhc_odometer`` (+ both), ``landmarks``
@@ -58,6 +60,10 @@ AIDINGS = {
     "landmarks": ("ZUPT + a landmark position fix (0.1 m) at every stop", {"smoother.landmarks": True}),
 }
 PAPER_MONTECARLO = {
+    # the paper's biases are "piecewise constant" (§2): a constant per run (turn-on) of the grade's
+    # 0.01 deg/h and 50 ug, no in-run Gauss-Markov drift
+    "imu.gyro_bias_instability_deg_h": 0.0, "imu.gyro_turn_on_bias_sigma_deg_h": 0.01,
+    "imu.accel_bias_instability_ug": 0.0, "imu.accel_turn_on_bias_sigma_ug": 50.0,
     "trolley.track_file": "trolley_straight_30m.csv", "trolley.irregularity_level": 0,
     "trolley.static_duration": 1.0, "trolley.stop_spacing": 30.0, "experiment.stopTime": 36.0,
     "ins.enabled": False, "smoother.zupt_interval": "inf", "smoother.velocity_sigma": 0.0001,
@@ -85,7 +91,8 @@ def _typed(value) -> tuple[str, str]:
 
 
 def variant_text(name: str, grade: str, extra: dict, what: str) -> str:
-    """The ``.ssv`` of one variant: the grade's parameters as ``imu.*``, then ``extra``."""
+    """The ``.ssv`` of one variant: the grade's parameters as ``imu.*`` (an ``imu.*`` of ``extra``
+    replaces the grade's value in place), then the rest of ``extra``."""
     lines = ['<?xml version="1.0" encoding="UTF-8"?>',
              f"<!-- {what}, with {GRADES[grade][1]}.",
              f"     Written by experiments/trolley_survey/variants.py (the ImuErrors parameters of "
@@ -93,7 +100,10 @@ def variant_text(name: str, grade: str, extra: dict, what: str) -> str:
              "     as imu.<parameter>, then the variant's own; tests/test_trolley_survey.py checks them). -->",
              f'<ssv:ParameterSet version="1.0" name="{name}" xmlns:ssv="{SSV}">', "  <ssv:Parameters>"]
     has_unit = False
+    extra = dict(extra)
     for pname, kind, value, unit in grade_parameters(grade):
+        if f"imu.{pname}" in extra:
+            kind, value = _typed(extra.pop(f"imu.{pname}"))
         u = f' unit="{unit}"' if unit else ""
         has_unit |= bool(unit)
         lines.append(f'    <ssv:Parameter name="imu.{pname}"><ssv:{kind} value="{value}"{u}/></ssv:Parameter>')
