@@ -355,7 +355,11 @@ def test_sampled_prediction_matches_the_exact_max_statistic_and_the_closed_forms
     assert np.allclose(p.pointwise_alignment_mm, 1e3 * np.sqrt(vy), rtol=5 / math.sqrt(2 * S))
     assert np.allclose(p.pointwise_level_mm, 1e3 * np.sqrt(vz), rtol=5 / math.sqrt(2 * S))
     assert p.metrics() == {"predicted_sigma_alignment_mm": p.sigma_alignment_mm,
-                           "predicted_sigma_level_mm": p.sigma_level_mm}
+                           "predicted_sigma_level_mm": p.sigma_level_mm,
+                           "predicted_peak_sigma_alignment_mm": p.pointwise_alignment_mm.max(),
+                           "predicted_peak_sigma_level_mm": p.pointwise_level_mm.max()}
+    # the max over the chord's points exceeds the largest pointwise sigma (the paper's statistic)
+    assert p.sigma_alignment_mm > p.pointwise_alignment_mm.max()
 
 
 def test_pointwise_sigma_from_a_joint_covariance_is_the_closed_form():
@@ -382,9 +386,8 @@ def test_covariance_analysis_of_the_simplified_case_gives_the_closed_forms(posit
              "accel_bias_correlation_time": math.inf}
     res = nominal_chord_accuracy(run, **{**NOMINAL, **grade, "heading_sigma": 1e-6, "position_sigma": SIGMA_R,
                                          "landmark_sigma": SIGMA_R})
-    from models.imu_errors import GM_SIGMA_PER_B
-    p_eps = (GM_SIGMA_PER_B * 0.01 * D2R / 3600.0) ** 2
-    p_nabla = (GM_SIGMA_PER_B * 50e-6 * 9.80665) ** 2
+    p_eps = (0.01 * D2R / 3600.0) ** 2  # the nominal's constant (turn-on) biases
+    p_nabla = (50e-6 * 9.80665) ** 2
     g0 = earth.gravity(0.0, 0.0)
     sy, sz = closed_form_sigma(run.grid.s, 1 / 6, 30.0, g0, P_PHI, p_eps, p_nabla, SIGMA_V,
                                SIGMA_R if position else math.inf)
@@ -401,14 +404,16 @@ def test_sensitivity_curves_follow_the_papers_remarks():
     axes = {"zupt_sigma": (np.array([0.03, 0.1, 0.3]), "mm/s", 1e-3),
             "tilt_sigma": (np.array([0.002, 0.02]), "deg", D2R),
             "heading_sigma": (np.array([0.02, 0.2]), "deg", D2R),
-            "gyro_bias_instability_deg_h": (np.array([0.003, 0.03]), "deg/h", 1.0),
-            "accel_bias_instability_ug": (np.array([10.0, 200.0]), "ug", 1.0)}
+            "gyro_turn_on_bias_sigma_deg_h": (np.array([0.003, 0.03]), "deg/h", 1.0),
+            "accel_turn_on_bias_sigma_ug": (np.array([10.0, 200.0]), "ug", 1.0)}
     c = sensitivity_curves(axes)
     nom = c["nominal"]
-    # the paper's nominal (0.1 mm/s, 0.005 deg/sqrt(h), 10 ug/sqrt(Hz), 0.01 deg/h, 50 ug,
-    # 0.006 / 0.06 deg): the largest pointwise sigma on the 30 m chord
-    assert nom["alignment_mm"] == pytest.approx(0.979, abs=0.01)
-    assert nom["level_mm"] == pytest.approx(0.913, abs=0.01)
+    # the paper's nominal (0.1 mm/s, 0.005 deg/sqrt(h), 10 ug/sqrt(Hz), constant biases of
+    # 0.01 deg/h and 50 ug, 0.006 / 0.06 deg): the largest pointwise sigma on the 30 m chord is
+    # the paper's Fig. 12 figure, 0.99 mm (alignment) and 0.70 mm (level), within 3 %
+    print(f"nominal: largest pointwise sigma {nom['alignment_mm']:.4f} / {nom['level_mm']:.4f} mm")
+    assert nom["alignment_mm"] == pytest.approx(0.99, rel=0.03)
+    assert nom["level_mm"] == pytest.approx(0.70, rel=0.03)
     z = c["zupt_sigma"]
     assert np.all(np.diff(z["alignment_mm"]) > 0) and np.all(np.diff(z["level_mm"]) > 0)  # Fig. 8
     assert z["alignment_mm"][1] == pytest.approx(nom["alignment_mm"], rel=1e-9)
@@ -416,16 +421,18 @@ def test_sensitivity_curves_follow_the_papers_remarks():
     assert np.allclose(z["alignment_mm_position"], z["alignment_mm"], rtol=3e-3)
     assert np.allclose(z["level_mm_position"], z["level_mm"], rtol=3e-3)
     # the level does not see the attitude errors nor the gyro biases (Figs. 10, 11) ...
-    for name in ("tilt_sigma", "heading_sigma", "gyro_bias_instability_deg_h"):
+    for name in ("tilt_sigma", "heading_sigma", "gyro_turn_on_bias_sigma_deg_h"):
         lv = c[name]["level_mm"]
         assert abs(lv[1] / lv[0] - 1) < 1e-3, name
     # ... while the alignment grows with the heading error and the gyro bias
     assert c["heading_sigma"]["alignment_mm"][1] > 1.05 * c["heading_sigma"]["alignment_mm"][0]
-    gb = c["gyro_bias_instability_deg_h"]["alignment_mm"]
+    gb = c["gyro_turn_on_bias_sigma_deg_h"]["alignment_mm"]
     assert gb[1] > 1.01 * gb[0]
-    # the accelerometer bias acts on the level only (Fig. 11; eq. 29 has no nabla)
-    ab = c["accel_bias_instability_ug"]
-    assert abs(ab["alignment_mm"][1] / ab["alignment_mm"][0] - 1) < 1e-3 and ab["level_mm"][1] > 2 * ab["level_mm"][0]
+    # the accelerometer bias does not act on the alignment (eq. 29 has no nabla) and on the level
+    # only a little (Fig. 11: "small"; eq. 30 saturates: a constant bias is pinned by the two ZUPTs)
+    ab = c["accel_turn_on_bias_sigma_ug"]
+    assert abs(ab["alignment_mm"][1] / ab["alignment_mm"][0] - 1) < 1e-3
+    assert ab["level_mm"][0] < ab["level_mm"][1] < 1.01 * ab["level_mm"][0]
 
 
 def test_prediction_from_the_smoothers_samples_agrees_with_its_joint_covariance():
@@ -463,7 +470,8 @@ def test_survey_chords_of_a_record_gives_the_study_metrics():
     sv = survey_chords(dist, truth, err, times=t, smoother=ca, n_samples=300, seed=4)
     assert sorted(sv.metrics) == sorted(["chord_alignment_max_error_mm", "chord_level_max_error_mm",
                                          "chord_alignment_rms_error_mm", "chord_level_rms_error_mm",
-                                         "predicted_sigma_alignment_mm", "predicted_sigma_level_mm"])
+                                         "predicted_sigma_alignment_mm", "predicted_sigma_level_mm",
+                                         "predicted_peak_sigma_alignment_mm", "predicted_peak_sigma_level_mm"])
     g = chord_grid(dist)
     a, v = chord_errors(g, truth[g.sample], err[g.sample])
     assert sv.metrics["chord_level_max_error_mm"] == 1e3 * np.abs(v).max()
