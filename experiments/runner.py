@@ -26,7 +26,7 @@ from fmus.errors import UserError
 from .study_protocol import RunData, Study
 
 HERE = Path(__file__).resolve().parent
-DEFAULT_MASTER = "jacobi"  # when neither the command line nor the experiment (rf:Master) names one
+DEFAULT_MASTER = "jacobi"  # when neither the command line nor the experiment (rf:FixedStep master=) names one
 
 
 def experiment_names() -> list[str]:

@@ -15,9 +15,10 @@ the FMU as an absolute path (:meth:`_Reader._resource`).
 The experiment (our ``org.railfmu.experiment`` annotation on ``ssd:DefaultExperiment``) may
 name the fixed-step master it runs best on, ``<rf:FixedStep stepSize="0.005"
 master="container"/>`` (``System.master``: used when the command line names none; an
-ssc:Annotation holds one element, so the master is an attribute of the step's). A variant may shorten or lengthen the run with the
-reserved parameter name ``experiment.stopTime`` (s; also ``--set experiment.stopTime=T``);
-``--stop-time`` still wins. Other tools ignore both (an SSD annotation; a variant is ours).
+ssc:Annotation holds one element, so the master is an attribute of the step's). A variant may
+shorten or lengthen the run with the reserved parameter name ``experiment.stopTime`` (s; also
+``--set experiment.stopTime=T``); ``--stop-time`` still wins. Other tools ignore both (an SSD
+annotation; a variant is ours).
 
 Every problem a user can cause is a one-line :class:`UserError` naming the file (with its
 line), the element and what is wrong; the system read is checked as every master checks it
