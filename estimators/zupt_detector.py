@@ -56,6 +56,10 @@ trolley is within the noise on the straight parts of the track: the detector the
 substitute for the ``stopped`` flag (``W = 200`` with ``min_samples = 200``: tactical 214 false
 alarms and 1 false stop, MEMS 33,155 and 46). The plain statistic of Skog et al. with ``g =
 9.8``, ``W = 20`` and the chi-square threshold misses every stop at the navigation grade.
+On a perfectly straight, level track without irregularities (the trolley survey's
+``paper_montecarlo``) cruising is rest for any IMU: there the detector took 77 % of the moving
+samples for rest (5,222 of 6,799, navigation grade) and the smoother's chords were off by
+decimetres; use the flag.
 """
 
 from __future__ import annotations
