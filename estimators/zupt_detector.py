@@ -70,14 +70,10 @@ from collections.abc import Mapping
 import numpy as np
 
 from models import earth
+from models.imu_errors import ACCEL_SI, GRADES, GYRO_NOISE_SI
 
 #: probability that a window at rest exceeds the default threshold (one false "moving" in 1e4)
 P_FALSE_MOVING = 1e-4
-
-
-#: (sigma_a m/s2, sigma_g rad/s) of the navigation grade (10 ug/sqrt(Hz), 0.005 deg/sqrt(h); Jiang et
-#: al. (2017)) at 200 Hz: ``noise_sigmas(models.imu_errors.GRADES["navigation_grade"], 0.005)``
-NAVIGATION_GRADE = (10e-6 * 9.80665 / math.sqrt(0.005), 0.005 * math.pi / 180 / 60 / math.sqrt(0.005))
 
 
 def noise_sigmas(grade: Mapping[str, float], dt: float) -> tuple[float, float]:
@@ -85,9 +81,13 @@ def noise_sigmas(grade: Mapping[str, float], dt: float) -> tuple[float, float]:
     an ``ImuErrors`` grade (``models.imu_errors.GRADES``; parameter names and datasheet units
     ``accel_noise_ug_sqrt_hz``, ``gyro_arw_deg_sqrt_h``) sampled every ``dt`` (s): density over
     ``sqrt(dt)``."""
-    from models.imu_errors import ACCEL_SI, GYRO_NOISE_SI
     root = math.sqrt(dt)
     return (grade["accel_noise_ug_sqrt_hz"] * ACCEL_SI / root, grade["gyro_arw_deg_sqrt_h"] * GYRO_NOISE_SI / root)
+
+
+#: (sigma_a m/s2, sigma_g rad/s) of the navigation grade (10 ug/sqrt(Hz), 0.005 deg/sqrt(h); Jiang et
+#: al. (2017)) at 200 Hz
+NAVIGATION_GRADE = noise_sigmas(GRADES["navigation_grade"], 0.005)
 
 
 def _window_sums(x: np.ndarray, window: int, lo: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
