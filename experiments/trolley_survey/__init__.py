@@ -88,11 +88,9 @@ def metric_name(kind: str, suffix: str = "") -> str:
 def position_errors(est: np.ndarray, true: np.ndarray) -> np.ndarray:
     """Estimate minus truth of rows of :data:`NAV` (or of latitude, longitude, height): (n, 3)
     NED in m, the latitude and longitude differences times the local radii plus height."""
-    from models import earth
+    from estimators.ins_error_model import ned_difference
 
-    rn, re = earth.principal_radii(true[:, 0], true[:, 2])
-    return np.stack([(est[:, 0] - true[:, 0]) * rn, (est[:, 1] - true[:, 1]) * re * np.cos(true[:, 0]),
-                     -(est[:, 2] - true[:, 2])], axis=1)
+    return ned_difference(est[:, 0], est[:, 1], est[:, 2], true[:, 0], true[:, 1], true[:, 2])
 
 
 def navigation_errors(est: np.ndarray, true: np.ndarray) -> dict[str, np.ndarray]:
