@@ -173,6 +173,7 @@ from estimators.ins_error_model import (DR, DV, PHI, ErrorModel, ImuGrade, corre
                                         ned_difference, skews)
 from estimators.ins_observer import INCREMENTS
 from estimators.observer import OfflineObserver
+from estimators.rail_play import BUTTERWORTH, RailPlay
 from estimators.strapdown import NAV, Strapdown
 from models import earth
 
@@ -194,11 +195,18 @@ _DEFAULTS: dict[str, Any] = {
     "zupt": True, "zupt_sigma": 1e-4, "zupt_interval": 0.0, "zupt_source": "flag",
     "nhc": False, "nhc_sigma": 1e-3, "odometer": False, "odometer_sigma": 1e-3,
     "landmarks": False, "landmark_sigma": 0.1, "memory_budget_mb": 256.0,
+    "play_model": "white", "play_sigma_lateral": 1e-3, "play_sigma_vertical": 5e-4, "play_wavelength": 2.0,
+    "play_damping": BUTTERWORTH,
 }
+#: the NHC's sigma when the play is modelled (``play_model="shaping"``): only the unmodelled rest
+NHC_SIGMA_SHAPING = 1e-4
 _BOOLS = ("feedback", "zupt", "nhc", "odometer", "landmarks")
-_CHOICES = {"error_model": ("paper12", "full15"), "zupt_source": ("flag", "detector")}
-_POSITIVE = ("filter_period", "zupt_sigma", "nhc_sigma", "odometer_sigma", "landmark_sigma", "memory_budget_mb")
-_NONNEGATIVE = ("tilt_sigma", "heading_sigma", "velocity_sigma", "position_sigma")
+_CHOICES = {"error_model": ("paper12", "full15"), "zupt_source": ("flag", "detector"),
+            "play_model": ("white", "shaping")}
+_POSITIVE = ("filter_period", "zupt_sigma", "nhc_sigma", "odometer_sigma", "landmark_sigma", "memory_budget_mb",
+             "play_wavelength", "play_damping")
+_NONNEGATIVE = ("tilt_sigma", "heading_sigma", "velocity_sigma", "position_sigma", "play_sigma_lateral",
+                "play_sigma_vertical")
 
 
 def check_settings(owner: str, settings: dict[str, Any]) -> dict[str, Any]:
@@ -208,6 +216,8 @@ def check_settings(owner: str, settings: dict[str, Any]) -> dict[str, Any]:
     if unknown:
         raise ValueError(f"{owner}: unknown setting(s) {unknown}; known: {sorted(_DEFAULTS)}")
     s = {**_DEFAULTS, **settings}
+    if s["play_model"] == "shaping" and "nhc_sigma" not in settings:
+        s["nhc_sigma"] = NHC_SIGMA_SHAPING
     for k, v in s.items():
         if k in _BOOLS:
             if not isinstance(v, (bool, np.bool_)):
@@ -232,6 +242,70 @@ def check_settings(owner: str, settings: dict[str, Any]) -> dict[str, Any]:
             s[k] = v
     ImuGrade(**{k: s[k] for k in _GRADE_NAMES})  # the grade's own checks
     return s
+
+
+class FilterModel:
+    """The filter's state: the INS error model's (:class:`~estimators.ins_error_model.ErrorModel`,
+    ``n_nav`` states, navigation first: ``PHI, DV, DR``), then with ``play_model="shaping"`` the
+    wheel-rail play's (:class:`~estimators.rail_play.RailPlay`, four nuisance states, not fed
+    back). Its matrices are the two blocks side by side; the play enters only the NHC rows."""
+
+    def __init__(self, s: dict[str, Any]) -> None:
+        self.nav = ErrorModel(s["error_model"], ImuGrade(**{k: s[k] for k in _GRADE_NAMES}))
+        self.play = RailPlay(s["play_sigma_lateral"], s["play_sigma_vertical"], s["play_wavelength"],
+                             s["play_damping"]) if s["play_model"] == "shaping" else None
+        self.n_nav = self.nav.n
+        self.names = self.nav.names + (self.play.names if self.play else ())
+        self.n = len(self.names)
+
+    def _pad(self, H: np.ndarray) -> np.ndarray:
+        out = np.zeros(H.shape[:-1] + (self.n,))
+        out[..., :self.n_nav] = H
+        return out
+
+    def initial_covariance(self, s: dict[str, Any]) -> np.ndarray:
+        """P0: the error model's from the settings' sigmas, the play's stationary covariance."""
+        m = self.n_nav
+        P = np.zeros((self.n, self.n))
+        P[:m, :m] = self.nav.initial_covariance(s["tilt_sigma"], s["heading_sigma"], s["velocity_sigma"],
+                                                s["position_sigma"])
+        if self.play:
+            P[self.n_nav:, self.n_nav:] = self.play.stationary_covariance()
+        return P
+
+    def discretize(self, A: np.ndarray, T, C_bn: np.ndarray, v_n: np.ndarray):
+        """``(Phi, Q_d)`` ``(M, n, n)`` of ``M`` epochs: the error model's over ``T`` (s) with
+        ``A`` held; the play's over the nominal's along-track distance ``ds = |x_b . v^n| T``
+        (``x_b`` the first column of ``C_bn``, ``v_n`` NED, m/s: the INS's body-x speed)."""
+        Phi, Qd = self.nav.discretize(A, T)
+        if not self.play:
+            return Phi, Qd
+        M, n, m = Phi.shape[0], self.n, self.n_nav
+        ds = np.abs(np.einsum("ki,ki->k", np.asarray(C_bn)[:, :, 0], np.asarray(v_n))) * np.asarray(T, dtype=float)
+        Pp, Qp = self.play.discretize(ds)
+        Phi_a, Q_a = np.zeros((M, n, n)), np.zeros((M, n, n))
+        Phi_a[:, :m, :m], Phi_a[:, m:, m:] = Phi, Pp
+        Q_a[:, :m, :m], Q_a[:, m:, m:] = Qd, Qp
+        return Phi_a, Q_a
+
+    def velocity_rows(self) -> np.ndarray:
+        return self._pad(self.nav.velocity_rows())
+
+    def position_rows(self) -> np.ndarray:
+        return self._pad(self.nav.position_rows())
+
+    def body_velocity_rows(self, C_bn: np.ndarray, v_n: np.ndarray) -> np.ndarray:
+        """``(M, 3, n)``: ``ErrorModel.body_velocity_rows`` of ``M`` epochs (``C_bn`` ``(M, 3,
+        3)``, ``v_n`` ``(M, 3)``) and, in rows y, z, the play's ``v_s (y', z')`` with ``v_s``
+        the nominal body-x speed (``RailPlay.velocity_rows``)."""
+        C, v = np.asarray(C_bn, dtype=float), np.asarray(v_n, dtype=float)
+        H = np.zeros((C.shape[0], 3, self.n))
+        CT = C.transpose(0, 2, 1)
+        H[:, :, PHI] = -CT @ skews(v)
+        H[:, :, DV] = CT
+        if self.play:
+            H[:, 1:, self.n_nav:] = self.play.velocity_rows(np.einsum("ki,ki->k", C[:, :, 0], v))
+        return H
 
 
 class _Store:
@@ -504,9 +578,10 @@ class AidedInsSmoother(OfflineObserver, SmootherRecord):
         if abs(steps - self.epoch_steps) > 1e-6 * steps:
             raise ValueError(f"AidedInsSmoother: filter_period {s['filter_period']!r} s is not a whole number of "
                              f"IMU steps ({self.dt!r} s)")
-        self.model = ErrorModel(s["error_model"], ImuGrade(**{k: s[k] for k in _GRADE_NAMES}))
+        self.states = FilterModel(s)
+        self.model = self.states.nav
         self.epoch_times = np.empty(0)
-        self.state_names = self.model.names
+        self.state_names = self.states.names
         self.filter_seconds = self.smoother_seconds = self.strapdown_seconds = 0.0
         self.counts: dict[str, int] = {}
         self.detector: dict[str, Any] = {}
@@ -551,7 +626,7 @@ class AidedInsSmoother(OfflineObserver, SmootherRecord):
         return detected
 
     def _run(self, t: np.ndarray, Z: np.ndarray, U: np.ndarray, mask: np.ndarray) -> np.ndarray:
-        s, model, dt = self.s, self.model, self.dt
+        s, model, dt = self.s, self.states, self.dt
         n_samples = t.shape[0]
         if n_samples > 1:
             steps = np.diff(t) / dt
@@ -607,7 +682,7 @@ class AidedInsSmoother(OfflineObserver, SmootherRecord):
         covariance recursion and the updates loop over its epochs, and the navigation part of
         the estimate is fed back at the block's end (open loop within one block: 1 s at the
         default epoch, where the linearisation error is ~|dx|^2, < 1e-9 of the error)."""
-        s, model, dt = self.s, self.model, self.dt
+        s, model, dt = self.s, self.states, self.dt
         n, N, n_samples = model.n, idx.size, t.shape[0]
         Pm, Pp, Phi_s, Q_s, a_s, d_s, c_s, nav = (store[k] for k in ("Pm", "Pp", "Phi", "Q", "a", "d", "c", "nav"))
         ins = self._initial_ins(U[0])
@@ -630,7 +705,7 @@ class AidedInsSmoother(OfflineObserver, SmootherRecord):
         counts = {"zupt_updates": 0, "nhc_updates": 0, "odometer_updates": 0, "landmark_updates": 0}
         nav[0] = ins.navigation()
         x = np.zeros(n)  # the filter's estimate relative to the fed-back INS
-        P = model.initial_covariance(s["tilt_sigma"], s["heading_sigma"], s["velocity_sigma"], s["position_sigma"])
+        P = model.initial_covariance(s)
         feedback, nhc, odometer = s["feedback"], s["nhc"], s["odometer"]
         zero = np.zeros(n)
         k0 = -1  # the last epoch done
@@ -661,7 +736,7 @@ class AidedInsSmoother(OfflineObserver, SmootherRecord):
                 f_n = np.diff(v, axis=0) / T[:, None] + np.cross(w2, v_m)
                 f_n[:, 2] -= earth.gravity(lat_m, h_m)
                 C_m = 0.5 * (C + np.concatenate((C0[None], C[:-1])))
-                Phi, Qd = model.discretize(model.system_matrices(lat_m, h_m, v_m, f_n, C_m), T)
+                Phi, Qd = model.discretize(model.nav.system_matrices(lat_m, h_m, v_m, f_n, C_m), T, C_m, v_m)
                 Phi_s[k0:k1], Q_s[k0:k1] = Phi, Qd
                 first = k0 + 1
                 store["nominal"][first:k1 + 1] = np.column_stack((lat_m, h_m, v_m, f_n, C_m.reshape(-1, 9)))
@@ -672,10 +747,7 @@ class AidedInsSmoother(OfflineObserver, SmootherRecord):
                     v_odo = (Z[idx[first:k1 + 1], 1] - Z[idx[k0:k1], 1]) / T
             vel = rows[:, 3:6]
             if nhc or odometer:
-                Hb = np.zeros((vel.shape[0], 3, n))
-                CT = C.transpose(0, 2, 1)
-                Hb[:, :, PHI] = -CT @ skews(vel)
-                Hb[:, :, DV] = CT
+                Hb = model.body_velocity_rows(C, vel)
                 vb = np.einsum("kji,kj->ki", C, vel)
             for j, k in enumerate(range(first, k1 + 1)):
                 if Phi is not None:
@@ -839,18 +911,19 @@ def covariance_analysis(times, f_n, C_bn, latitude, velocity, zupt, position=Non
     zupt = np.broadcast_to(np.asarray(zupt, dtype=bool), (N,))
     pos, nhc, odo = (np.zeros(N, dtype=bool) if x is None else np.broadcast_to(np.asarray(x, dtype=bool), (N,))
                      for x in (position, nhc, odometer))
-    model = ErrorModel(s["error_model"], ImuGrade(**{k: s[k] for k in _GRADE_NAMES}))
+    model = FilterModel(s)
     n = model.n
     shapes = {"Pm": (N, n, n), "Pp": (N, n, n), "Phi": (max(N - 1, 0), n, n), "Q": (max(N - 1, 0), n, n),
               "C": (max(N - 1, 0), n, n), "Ps": (N, n, n), "a": (N, n), "d": (N, n), "s": (N, n)}
     store = _Store(shapes, s["memory_budget_mb"] * 1e6)
-    P = model.initial_covariance(s["tilt_sigma"], s["heading_sigma"], s["velocity_sigma"], s["position_sigma"])
+    P = model.initial_covariance(s)
     H_v, H_r = model.velocity_rows(), model.position_rows()
     R_v = s["zupt_sigma"] ** 2 * np.eye(3)  # the filter's very matrix: equal covariances to the bit
     for a in range(1, N, 512):  # Phi, Q of the epochs in blocks (bounded temporaries)
         b = min(a + 512, N)
-        A = model.system_matrices(lat[a:b], hgt[a:b], vel[a:b], f_n[a:b], C_bn[a:b])
-        store["Phi"][a - 1:b - 1], store["Q"][a - 1:b - 1] = model.discretize(A, np.diff(times[a - 1:b]))
+        A = model.nav.system_matrices(lat[a:b], hgt[a:b], vel[a:b], f_n[a:b], C_bn[a:b])
+        store["Phi"][a - 1:b - 1], store["Q"][a - 1:b - 1] = model.discretize(A, np.diff(times[a - 1:b]), C_bn[a:b],
+                                                                               vel[a:b])
     zero = np.zeros(n)
     for k in range(N):
         if k:
@@ -863,7 +936,7 @@ def covariance_analysis(times, f_n, C_bn, latitude, velocity, zupt, position=Non
             Hs.append(H_v)
             Rs += [s["zupt_sigma"] ** 2] * 3
         if nhc[k] or odo[k]:
-            Hb = model.body_velocity_rows(C_bn[k], vel[k])
+            Hb = model.body_velocity_rows(C_bn[k:k + 1], vel[k:k + 1])[0]
             if nhc[k]:
                 Hs.append(Hb[1:])
                 Rs += [s["nhc_sigma"] ** 2] * 2
