@@ -79,8 +79,30 @@ Measurements (the observer's ``measurements``; NaN or masked: absent):
   the ``Trolley`` FMU the body point rides the rail and x is the rail tangent, so the
   constraint is exact unless its ``wobble`` is set (the default ``nhc_sigma``, 1 mm/s, is for
   that case). A wobble of amplitude ``a`` and wavelength ``l`` at speed ``v`` (the wheel-rail
-  play) moves the body sideways at up to ``2 pi a v / l``: ``nhc_sigma`` should be its rms,
-  ``sqrt(2) pi a v / l`` (2 mm at 0.5 m and 1 m/s: 18 mm/s), or the constraint is overconfident.
+  play) moves the body sideways at up to ``2 pi a v / l``: with ``play_model="white"`` (the
+  default) ``nhc_sigma`` should be its rms, ``sqrt(2) pi a v / l`` (2 mm at 0.5 m and 1 m/s:
+  18 mm/s), or the constraint is overconfident. White noise lets the integral of the body's
+  cross-track velocity -- its offset from the rail -- wander like a random walk, although the
+  play bounds it. ``play_model="shaping"`` says so: four nuisance states appended after the
+  error model's (:class:`FilterModel`), the body's lateral and vertical offset from the rail and
+  their slopes in the distance, ``(y, y', z, z')``, each a stationary damped oscillator in the
+  distance travelled (:mod:`estimators.rail_play`: stationary sigmas ``play_sigma_lateral``,
+  ``play_sigma_vertical``, natural wavenumber ``2 pi / play_wavelength``, ``play_damping``),
+  sampled exactly over each epoch's along-track distance ``ds = |x_b^T v_m| T`` (the nominal's
+  body-x speed at mid-epoch; 0 at rest: ``Phi = I``, ``Q = 0``), their prior the stationary
+  covariance. The NHC rows then read ``z = v~^b_{y,z} = H_b dx + v_s (y', z')`` (``v_s`` the
+  INS's body-x speed at the epoch: the true cross-track velocity is ``d(offset)/dt = v_s
+  dy/ds``) and ``nhc_sigma`` is only what the play model leaves out (default 0.1 mm/s with
+  ``shaping``; on the ``Trolley`` FMU the body's cross-track velocity is the wobble's slope
+  times the speed exactly, the cant mixing some vertical play into body y, which the lateral
+  state absorbs). The play states are not navigation: they stay in the
+  filter's state (not fed back), like the biases; the smoother, ``error_samples``,
+  ``joint_covariance`` and :func:`covariance_analysis` carry them as any other state.
+  Measured on the 600 m survey with the trolley wobbling 1 mm / 0.5 mm at 2 m (navigation
+  grade, NHC + odometer, seed 1): max chord error 1.46 / 1.69 mm (alignment / level) with the
+  white NHC at 3 mm/s, 0.74 / 0.46 mm with the shaping model at damping 1/sqrt(2), 0.37 /
+  0.21 mm at damping 0.1 (the wobble is one sinusoid: a narrowband model fits it); the
+  smoothed lateral play follows the wobble to 0.11 mm rms (``tests/test_aided_ins.py``).
 * odometer (``odometer``, m, cumulative): speed form. ``z = x_b^T (r_k - r_{k-1}) / T -
   (s_k - s_{k-1}) / T``, the INS's mean body-x speed over the epoch (its own position
   increment, ``x_b`` at mid-epoch) minus the odometer's, with the body-x row of
@@ -99,7 +121,7 @@ Memory: per epoch the record holds ``Phi``, ``Q``, ``P-``, ``P+``, ``C``, ``P^s`
 floats each), five state vectors and the nominal (17 floats), and after the first
 :meth:`~SmootherRecord.error_samples` the backward chain's noise covariances (``n^2``); per IMU sample the INS's
 navigation (9 floats). Up to ``memory_budget_mb`` (default 256 MB; a 700 s run at 20 Hz epochs
-takes 160 MB with 15 states, 107 MB with 12) they are numpy arrays in RAM; beyond it the
+takes 160 MB with 15 states, 107 MB with 12, 263 MB with 15 + 4 play states) they are numpy arrays in RAM; beyond it the
 same arrays are ``np.memmap`` files in a temporary directory (removed with the observer), so a
 long run's peak memory is the budget plus one block's temporaries (the smoother's gains and
 the smoothed output are formed in blocks too), not the run; the results are bit for bit the
@@ -148,7 +170,17 @@ down``
 ``zupt_sigma``                 m/s     1e-4
 ``zupt_interval``              s       0: every stopped epoch; inf: one per stop
 ``zupt_source``                --      ``"flag"`` (the ``stopped`` measurement) or ``"detector"``
-``nhc``, ``nhc_sigma``         -, m/s  non-holonomic constraint (false, 1e-3)
+``nhc``, ``nhc_sigma``         -, m/s  non-holonomic constraint (false; 1e-3, with ``play_model=
+                                       "shaping"`` 1e-4: only what the play model leaves out)
+``play_model``                 --      the body's cross-track velocity in the NHC: ``"white"``
+                                       (default: noise of ``nhc_sigma``) or ``"shaping"`` (the
+                                       wheel-rail play as four states, :mod:`estimators.rail_play`)
+``play_sigma_lateral``         m       stationary sigma of the lateral play (1e-3; a sinusoid of
+                                       amplitude ``a``: ``a / sqrt(2)``)
+``play_sigma_vertical``        m       stationary sigma of the vertical play (5e-4)
+``play_wavelength``            m       the play's natural wavelength ``2 pi / k`` (2.0)
+``play_damping``               -       the play oscillator's damping ``zeta`` (``1/sqrt(2)``;
+                                       smaller: a narrower spectrum about the wavelength)
 ``odometer``,                  -, m/s  odometer speed (false, 1e-3)
 ``odometer_sigma``
 ``landmarks``,                 -, m    landmark position fixes (false, 0.1)

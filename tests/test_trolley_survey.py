@@ -475,7 +475,15 @@ def test_the_smoother_follows_the_grade_and_the_variant(fmu_dir):
     for k in ("gyro_arw_deg_sqrt_h", "gyro_bias_instability_deg_h", "accel_noise_ug_sqrt_hz",
               "accel_bias_instability_ug", "gyro_bias_correlation_time", "accel_bias_correlation_time"):
         assert smoother.settings[k] == GRADES["mems_grade"][k] == s.component("imu").parameters[k]
-    assert smoother.settings["nhc"] is True and smoother.settings["nhc_sigma"] == 0.003
+    assert smoother.settings["nhc"] is True and smoother.settings["nhc_sigma"] == 1e-4
+    # the play model: the wobble's rms and, bound to the trolley's parameter, its wavelength
+    assert smoother.settings["play_model"] == "shaping"
+    assert smoother.settings["play_sigma_lateral"] == pytest.approx(1e-3 / math.sqrt(2), rel=1e-15)
+    assert smoother.settings["play_sigma_vertical"] == pytest.approx(5e-4 / math.sqrt(2), rel=1e-15)
+    assert smoother.setting_parameters["play_wavelength"] == "trolley.wobble_wavelength"
+    assert smoother.settings["play_wavelength"] == s.component("trolley").parameters["wobble_wavelength"] == 2.0
+    s = read_system(EXP, variant="zupt_nhc", fmu_dirs=[DEFAULT_OUT], overrides={"trolley": {"wobble_wavelength": 3.0}})
+    assert next(o for o in s.observers if o.name == "smoother").settings["play_wavelength"] == 3.0
     assert not next(o for o in s.observers if o.name == "ins").enabled
     assert s.master == "container" and s.stop_time == 700.0
     s = read_system(EXP, variant="paper_montecarlo", fmu_dirs=[DEFAULT_OUT],
