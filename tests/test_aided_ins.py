@@ -226,6 +226,19 @@ def test_covariance_analysis_is_the_smoothers_covariance(record):
     s1 = np.sqrt(np.einsum("kii->ki", ca.P_smoothed[:, DR, DR]))
     s2 = np.sqrt(np.einsum("kii->ki", obs.P_smoothed[:, DR, DR]))
     assert np.abs(s1 / s2 - 1).max() < 0.02
+    # with the play as shaping states: the same distances per epoch (|x_b . v| T of the
+    # nominal), so the play's covariances to rounding without the NHC (measured 1e-15 of
+    # their scale), and with it as above (measured 0.9 %)
+    play = dict(play_model="shaping", play_sigma_lateral=7e-4, play_sigma_vertical=3.5e-4, position_sigma=1e-4)
+    obs, _ = run(record, n=8001, **play)
+    ca = covariance_analysis(zupt=obs.zupt_epochs, **play, **obs.nominal())
+    P1, P2 = np.asarray(ca.P_smoothed)[:, 12:, 12:], np.asarray(obs.P_smoothed)[:, 12:, 12:]
+    assert np.abs(P1 - P2).max() < 1e-12 * np.abs(P2).max()
+    obs, _ = run(record, n=8001, nhc=True, **play)
+    ca = covariance_analysis(zupt=obs.zupt_epochs, nhc=aided, **play, **obs.nominal())
+    s1 = np.sqrt(np.einsum("kii->ki", ca.P_smoothed[:, DR, DR]))
+    s2 = np.sqrt(np.einsum("kii->ki", obs.P_smoothed[:, DR, DR]))
+    assert np.abs(s1 / s2 - 1).max() < 0.02
 
 
 def _normalised_errors(record, seeds, **settings) -> np.ndarray:
@@ -422,6 +435,11 @@ def test_speed(record):
     ({"heading": "north"}, "heading must be a number"),
     ({"gyro_arw_deg_sqrt_h": math.inf}, "gyro_arw_deg_sqrt_h must be finite"),
     ({"bogus": 1}, "unknown setting(s) ['bogus']"),
+    ({"play_model": "pink"}, "play_model must be one of white, shaping, not 'pink'"),
+    ({"play_wavelength": 0.0}, "play_wavelength must be > 0"),
+    ({"play_damping": -0.5}, "play_damping must be > 0"),
+    ({"play_sigma_lateral": -1e-3}, "play_sigma_lateral must be >= 0"),
+    ({"play_sigma_vertical": "1 mm"}, "play_sigma_vertical must be a number"),
 ])
 def test_bad_settings_are_one_line(settings, message):
     with pytest.raises(ValueError) as info:
