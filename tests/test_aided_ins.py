@@ -2,7 +2,9 @@
 (navigation grade, 150 s: 10 s rest, stops every 60 m): the ideal IMU's numerical floor, the
 open-loop filter + RTS against estimators.smoothers.rts, closed loop against open loop, the
 sampled smoothing errors against the brute-force joint covariance, the filter's consistency
-over a Monte Carlo of IMU error seeds, the aiding options, the memory budget and bad input."""
+over a Monte Carlo of IMU error seeds, the aiding options, the wheel-rail play as shaping-filter
+states (zero play is the white NHC; on the wobbling trolley it beats it), the memory budget and
+bad input."""
 
 from __future__ import annotations
 
