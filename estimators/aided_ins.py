@@ -928,7 +928,8 @@ def covariance_analysis(times, f_n, C_bn, latitude, velocity, zupt, position=Non
     (their rows from ``C_bn`` and ``velocity``, as the filter's at the end of the interval).
     ``settings``: those of :class:`AidedInsSmoother` that concern the covariances (the grade,
     the P0 sigmas, ``error_model``, ``zupt_sigma``, ``landmark_sigma``, ``nhc_sigma``,
-    ``odometer_sigma``, ``memory_budget_mb``). ``AidedInsSmoother.nominal()`` and ``.zupt_epochs`` after a run
+    ``odometer_sigma``, the ``play_*`` settings (the play's distance per epoch is
+    ``|x_b . velocity| T``, as the filter's), ``memory_budget_mb``). ``AidedInsSmoother.nominal()`` and ``.zupt_epochs`` after a run
     reproduce its covariances to rounding. Returns a :class:`CovarianceAnalysis`
     (``epoch_times``, ``P_filter``, ``P_smoothed``, ``error_samples``, ``joint_covariance``).
 
