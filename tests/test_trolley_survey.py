@@ -483,7 +483,7 @@ def test_the_smoother_follows_the_grade_and_the_variant(fmu_dir):
     smoother = next(o for o in s.observers if o.name == "smoother")
     assert smoother.settings["accel_noise_ug_sqrt_hz"] == 20.0 and smoother.settings["gyro_arw_deg_sqrt_h"] == 0.005
     assert smoother.settings["zupt_interval"] == math.inf
-    assert (s.stop_time, s.stop_time_from) == (36.0, "variant paper_montecarlo (experiment.stopTime)")
+    assert (s.stop_time, s.stop_time_from) == (31.5, "variant paper_montecarlo (experiment.stopTime)")
     assert s.component("trolley").parameters["track_file"] == "trolley_straight_30m.csv"
     assert smoother.setting_signals["tilt_error_north"] == "initial_errors.y_1"
 
@@ -503,7 +503,7 @@ def test_paper_run_chord_errors_from_its_files(paper_run):
     out, m = paper_run
     sig = pd.read_csv(out / "signals.csv")
     est = pd.read_csv(out / "estimates_smoother.csv")
-    assert np.array_equal(sig.time.to_numpy(), est.time.to_numpy()) and sig.time.iloc[-1] == 36.0
+    assert np.array_equal(sig.time.to_numpy(), est.time.to_numpy()) and sig.time.iloc[-1] == 31.5
     d = sig["trolley.distance"].to_numpy()
     rn, re = earth.principal_radii(sig["trolley.latitude"].to_numpy(), sig["trolley.height"].to_numpy())
     err = np.column_stack([(est["smoother.latitude"] - sig["trolley.latitude"]) * rn,
@@ -563,7 +563,7 @@ def test_reduced_monte_carlo_agrees_with_its_prediction(reduced_monte_carlo):
     assert "| paper_montecarlo |" in md and "predicted / MC" in md and "0.99" in md and "0.70" in md
     assert (out / "max_error_histograms.png").is_file()
     runs = table["paper_montecarlo"]["runs"]
-    assert len(runs) == 20 and all(m["master"] == "container" and m["stop_time_s"] == 36.0 for m in runs.values())
+    assert len(runs) == 20 and all(m["master"] == "container" and m["stop_time_s"] == 31.5 for m in runs.values())
 
 
 @pytest.mark.slow
