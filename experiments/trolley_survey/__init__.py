@@ -231,20 +231,33 @@ class TrolleySurvey(Study):
         sr = _survey(run)
         return sr.series() if sr is not None else {}
 
-    def summary_md(self, summary: dict[str, dict[str, dict]], runs: int) -> str:
+    def summary_md(self, summary: dict[str, dict], runs: int) -> str:
+        """The two Monte Carlo statistics beside their predictions and the paper
+        (:func:`survey_accuracy.montecarlo_rows`; the pooled peak RMS is in the summary since
+        :meth:`study_tables` ran first), the aiding table, then the statistics of every metric."""
         from .survey_accuracy import aiding_rows, montecarlo_rows
 
         L = montecarlo_rows(summary)
         values = {v: (st["chord_alignment_max_error_mm"]["rms"], st["chord_level_max_error_mm"]["rms"])
                   for v, st in summary.items() if "chord_alignment_max_error_mm" in st}
         aid = aiding_rows(values, f"RMS over {runs} runs of the max |chord error| per run")
-        return "\n".join([*L, "", *aid, "", super().summary_md(summary, runs)]).strip()
+        per_run = {v: {k: x for k, x in st.items() if isinstance(x, dict)} for v, st in summary.items()}
+        return "\n".join([*L, "", *aid, "", super().summary_md(per_run, runs)]).strip()
 
     def study_tables(self, table: dict, series: dict) -> str:
-        from .survey_accuracy import repeatability, repeatability_rows
+        """Per variant the pooled peak RMS over runs of the chord errors
+        (:func:`survey_accuracy.pooled_peak_rms`: into its ``summary``, plain numbers beside the
+        statistics over runs; a refusal to pool runs of different chord points goes there as
+        ``chord_peak_rms_refused`` and into table.md) and the repeatability (Table 1)."""
+        from .survey_accuracy import pooled_peak_rms, repeatability, repeatability_rows
 
         L = []
         for v, runs in series.items():
+            try:
+                table[v]["summary"].update(pooled_peak_rms(runs))
+            except ValueError as exc:
+                table[v]["summary"]["chord_peak_rms_refused"] = str(exc)
+                L += [f"`{v}`: no peak RMS: {exc}.", ""]
             rows = repeatability(runs)
             if rows:
                 table[v]["repeatability"] = rows  # into table.json too
