@@ -104,6 +104,21 @@ class SurveyRun:
                 "prediction_relative_se_level": self.prediction.relative_se_level,
                 "chords_surveyed": int(self.grid.chord_start.size), "chord_points": int(self.grid.n_points)}
 
+    def pointwise_sigma(self) -> tuple[np.ndarray, np.ndarray]:
+        """The exact pointwise sigma (mm) of the chord errors, alignment and level at
+        ``grid.s``: the smoother's joint covariance of the position errors at the grid's epochs
+        through :func:`estimators.chord_accuracy.chord_sigma_from_covariance` (its blocks grow
+        as the square of the grid: for tests and short runs; the metrics sample instead)."""
+        from estimators.chord_accuracy import chord_sigma_from_covariance
+        from estimators.ins_error_model import DR
+
+        g = self.grid
+        epochs, inverse = np.unique(self.obs.nearest_epochs(self.t[g.sample]), return_inverse=True)
+        n, m = len(self.obs.state_names), epochs.size
+        cov = self.obs.joint_covariance(epochs).reshape(m, n, m, n)[:, DR, :, DR][inverse][:, :, inverse]
+        sy, sz = chord_sigma_from_covariance(g, self.positions[g.sample], cov.reshape(3 * g.sample.size, -1))
+        return 1e3 * sy, 1e3 * sz
+
     def truth_irregularity(self, track) -> tuple[np.ndarray, np.ndarray]:
         """Eq. 1 of the body's true path at the chord points (alignment, level; m)."""
         g = self.grid.sample
