@@ -590,6 +590,13 @@ def test_pooled_peak_rms_of_hand_made_series():
     with pytest.raises(ValueError, match="run 5 surveys no chord points"):
         pooled_peak_rms({**series, 5: {}})
     assert pooled_peak_rms({1: {}, 2: {}}) == {}
+    # the study keeps its table and says why it did not pool
+    from experiments.trolley_survey import STUDY
+
+    table = {"v": {"runs": {}, "summary": {}}}
+    md = STUDY.study_tables(table, {"v": {**series, 5: {}}})
+    assert "run 5 surveys no chord points" in table["v"]["summary"]["chord_peak_rms_refused"]
+    assert "`v`: no peak RMS: cannot pool" in md
 
 
 @pytest.fixture(scope="module")

@@ -39,9 +39,11 @@ Metrics (``metrics.json``): with the smoother, those of
 :mod:`experiments.trolley_survey.survey_accuracy` (``chord_alignment_max_error_mm``,
 ``chord_level_max_error_mm``, ``chord_alignment_rms_error_mm``, ``chord_level_rms_error_mm``,
 ``predicted_sigma_alignment_mm``, ``predicted_sigma_level_mm``, ``filter_seconds``,
-``smoother_seconds``). With the INS (not switched off by ``ins.enabled=false``), the INS
-against the trolley over the run: ``ins_position_error_max_mm``
-(the largest 3-D position error), ``ins_velocity_error_max_mm_s`` (the largest 3-D velocity
+``smoother_seconds``); over a Monte Carlo (``--runs N``) the study's summary adds the peak RMS
+over runs of the chord errors, ``chord_alignment_peak_rms_error_mm`` and
+``chord_level_peak_rms_error_mm`` (the paper's Fig. 12 statistic; ``survey_accuracy``). With
+the INS (not switched off by ``ins.enabled=false``), the INS against the trolley over the run:
+``ins_position_error_max_mm`` (the largest 3-D position error), ``ins_velocity_error_max_mm_s`` (the largest 3-D velocity
 error), ``ins_attitude_error_max_deg`` (the largest rotation angle between the INS's and the
 true attitude), each also as the largest up to 30 s and 60 s after the start of motion
 (``..._30s``, ``..._60s``: the first free-inertial spans between stops), plus
