@@ -35,10 +35,12 @@ are ~1 mm it is off by ~1e-4 of them (0.1 um), growing in proportion to the erro
 at 9 cm; measured in ``tests/test_chord_accuracy.py``). A constant error and a turn of the
 whole survey about the vertical give no chord error, exactly.
 
-Prediction of the paper's statistic
------------------------------------
-The paper's figure of merit (Fig. 12) is, per run, the maximum ``|Delta|`` over all surveyed
-chord points, and over runs its RMS. From ``S`` samples of the smoother's joint Gaussian of
+Prediction of the RMS of the max
+--------------------------------
+The issue's figure of merit (from the paper's "We take the maximum value of track
+irregularity error", § 6.1) is, per run, the maximum ``|Delta|`` over all surveyed chord
+points, and over runs its RMS; the paper's Fig. 12 values themselves equal the largest
+pointwise sigma (below, Sensitivity). From ``S`` samples of the smoother's joint Gaussian of
 the position errors at the grid samples (``AidedInsSmoother.error_samples``, or
 ``covariance_analysis(...).error_samples``) :func:`predict_chord_sigma` returns
 ``sqrt(mean_S max_s Delta^2)`` (max over all surveyed points) for alignment and level, the
@@ -293,7 +295,7 @@ class ChordPrediction:
     """Predicted accuracy of a survey's chords from ``n_samples`` error trajectories.
 
     ``sigma_alignment_mm``, ``sigma_level_mm``: the predicted RMS over runs of the per-run
-    max |chord error| (the paper's Fig. 12 statistic); ``relative_se_alignment``,
+    max |chord error| (the issue's statistic); ``relative_se_alignment``,
     ``relative_se_level``: their relative standard errors (sampling); ``pointwise_alignment_mm``,
     ``pointwise_level_mm`` (n_points): the RMS of the chord error at each point (its sigma;
     the mean is 0), at distances ``s`` (m)."""

@@ -8,8 +8,8 @@ Per run (:func:`chord_metrics`), from the offline observer ``smoother``
   at the samples of the survey's chord grid (:func:`estimators.chord_accuracy.chord_grid` on the
   trolley's true ``distance``: 0.5 m spacing, consecutive 30 m chords, 5 m offset);
 * the chord errors of every surveyed point, exact (:func:`estimators.chord_accuracy.chord_errors`
-  with the trolley's true n0 positions), and the paper's statistic, the max ``|error|`` over the
-  run, and the rms: ``chord_alignment_max_error_mm``, ``chord_level_max_error_mm``,
+  with the trolley's true n0 positions), the max ``|error|`` over the run (the issue's
+  statistic) and the rms: ``chord_alignment_max_error_mm``, ``chord_level_max_error_mm``,
   ``chord_alignment_rms_error_mm``, ``chord_level_rms_error_mm``;
 * the prediction of that statistic from the smoother's joint Gaussian of the errors:
   :data:`PREDICTION_SAMPLES` draws at the grid's epochs (``smoother.error_samples``, seeded by
