@@ -648,7 +648,10 @@ def test_the_500_run_monte_carlo(tmp_path, fmu_dir):
     the smoother's joint covariance within 15 % of the Monte Carlo RMS of the max chord errors,
     and the Monte Carlo's peak RMS (the paper's statistic) within 10 % of the predicted peak
     pointwise sigma and of the paper's 0.99 / 0.70 mm (an RMS over 500 runs at one point: 3.2 %
-    relative standard error). Measured: see the print (and the report of the commit)."""
+    relative standard error). Measured (seeds 1-500; 81 s on the 2-core machine at load ~3):
+    RMS of max 1.511 / 1.169 mm (alignment / level), predicted 1.505 / 1.190 (ratios 1.00 /
+    1.02); peak RMS 0.975 / 0.698 mm, predicted peak sigma 1.012 / 0.725 (1.04 / 1.04), the
+    paper's 0.99 / 0.70 to 1.5 % / 0.3 %."""
     from experiments.study import run_study
 
     table = run_study("trolley_survey", tmp_path, variants=["paper_montecarlo"], runs=500, log=sys.stderr)
