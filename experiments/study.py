@@ -9,6 +9,9 @@ libraries with their own state); a local cluster by default, or the scheduler at
 default 1), every seeded component (track profile, sensor noise) taking the run's seed.
 ``table.json`` is then ``{variant: {"runs": {seed: metrics}, "summary": {metric: statistics}}}``
 over every numeric metric (nested keys joined with dots) and ``table.md`` shows the summary.
+The study's ``study_tables`` runs before its ``summary_md`` and may add to a variant's summary
+what only the members' series together give (e.g. a statistic pooled over runs at each point
+of a grid), as plain values beside the statistics.
 Members write no files (no CSVs, plots or reports; ``--keep-runs`` keeps them, one
 sub-folder per variant and seed) and pay no per-run fixed cost a worker has already paid:
 imports stay loaded in the worker, the FMUs' up-to-date check derives no model.
@@ -154,8 +157,8 @@ def run_study(name: str, out: Path | str | None = None, scheduler: str | None = 
             series[v] = {s: results[v, s].pop("series", {}) for s in seeds}
             member_runs = {s: results[v, s] for s in seeds}
             table[v] = {"runs": member_runs, "summary": summarise(member_runs)}
+        extra = exp.study.study_tables(table, series)  # first: it may add values pooled over runs to a summary
         md.append(exp.study.summary_md({v: t["summary"] for v, t in table.items()}, runs))
-        extra = exp.study.study_tables(table, series)
         md += ["", extra] if extra else []
         plots = exp.study.study_figures(table, series, out)
         md += ["", *[f"![{p}]({p})" for p in plots], ""] if plots else []

@@ -238,6 +238,9 @@ EXCHANGE_STOP = {"train_resistance_measured": 30.0,
                  # the straight run at rest for 1 s: by 2 s its lateral increment dv_y spans 3e-8 m/s, five
                  # orders below dv_x, whose rounding (1e-19) is then 2e-12 of dv_y's range; at 5 s, 2e-13
                  "trolley_survey/paper_montecarlo": 5.0}
+# paper_montecarlo's 5 m/s2 ramps: dv_x reaches 0.025 m/s per step while dv_y spans 3.7e-7 m/s
+# (the Coriolis term at 1 m/s), so one ulp of dv_x (3.5e-18) is 9.4e-12 of dv_y's range (measured 5.3e-12)
+EXCHANGE_RTOL = {"trolley_survey/paper_montecarlo": 2e-11}
 
 
 def _exchange_cases():
@@ -305,7 +308,7 @@ def test_exported_ssp_runs_in_libcosim_like_our_jacobi_master(tmp_path, experime
     assert {c for c, _, _ in compared} == has_own
     print(f"worst deviation from our Jacobi master: {max(worst.values()):.2e} of range ({len(worst)} signals)")
     # at least two signals that vary (a train run's own outputs are its two states, s and v)
-    assert len(worst) >= 2 and max(worst.values()) <= RTOL, worst
+    assert len(worst) >= 2 and max(worst.values()) <= EXCHANGE_RTOL.get(f"{experiment}/{variant}", RTOL), worst
 
 
 def _outputs(fmu) -> list[str]:

@@ -39,9 +39,11 @@ Metrics (``metrics.json``): with the smoother, those of
 :mod:`experiments.trolley_survey.survey_accuracy` (``chord_alignment_max_error_mm``,
 ``chord_level_max_error_mm``, ``chord_alignment_rms_error_mm``, ``chord_level_rms_error_mm``,
 ``predicted_sigma_alignment_mm``, ``predicted_sigma_level_mm``, ``filter_seconds``,
-``smoother_seconds``). With the INS (not switched off by ``ins.enabled=false``), the INS
-against the trolley over the run: ``ins_position_error_max_mm``
-(the largest 3-D position error), ``ins_velocity_error_max_mm_s`` (the largest 3-D velocity
+``smoother_seconds``); over a Monte Carlo (``--runs N``) the study's summary adds the peak RMS
+over runs of the chord errors, ``chord_alignment_peak_rms_error_mm`` and
+``chord_level_peak_rms_error_mm`` (the paper's Fig. 12 statistic; ``survey_accuracy``). With
+the INS (not switched off by ``ins.enabled=false``), the INS against the trolley over the run:
+``ins_position_error_max_mm`` (the largest 3-D position error), ``ins_velocity_error_max_mm_s`` (the largest 3-D velocity
 error), ``ins_attitude_error_max_deg`` (the largest rotation angle between the INS's and the
 true attitude), each also as the largest up to 30 s and 60 s after the start of motion
 (``..._30s``, ``..._60s``: the first free-inertial spans between stops), plus
@@ -231,20 +233,33 @@ class TrolleySurvey(Study):
         sr = _survey(run)
         return sr.series() if sr is not None else {}
 
-    def summary_md(self, summary: dict[str, dict[str, dict]], runs: int) -> str:
+    def summary_md(self, summary: dict[str, dict], runs: int) -> str:
+        """The two Monte Carlo statistics beside their predictions and the paper
+        (:func:`survey_accuracy.montecarlo_rows`; the pooled peak RMS is in the summary since
+        :meth:`study_tables` ran first), the aiding table, then the statistics of every metric."""
         from .survey_accuracy import aiding_rows, montecarlo_rows
 
         L = montecarlo_rows(summary)
         values = {v: (st["chord_alignment_max_error_mm"]["rms"], st["chord_level_max_error_mm"]["rms"])
                   for v, st in summary.items() if "chord_alignment_max_error_mm" in st}
         aid = aiding_rows(values, f"RMS over {runs} runs of the max |chord error| per run")
-        return "\n".join([*L, "", *aid, "", super().summary_md(summary, runs)]).strip()
+        per_run = {v: {k: x for k, x in st.items() if isinstance(x, dict)} for v, st in summary.items()}
+        return "\n".join([*L, "", *aid, "", super().summary_md(per_run, runs)]).strip()
 
     def study_tables(self, table: dict, series: dict) -> str:
-        from .survey_accuracy import repeatability, repeatability_rows
+        """Per variant the pooled peak RMS over runs of the chord errors
+        (:func:`survey_accuracy.pooled_peak_rms`: into its ``summary``, plain numbers beside the
+        statistics over runs; a refusal to pool runs of different chord points goes there as
+        ``chord_peak_rms_refused`` and into table.md) and the repeatability (Table 1)."""
+        from .survey_accuracy import pooled_peak_rms, repeatability, repeatability_rows
 
         L = []
         for v, runs in series.items():
+            try:
+                table[v]["summary"].update(pooled_peak_rms(runs))
+            except ValueError as exc:
+                table[v]["summary"]["chord_peak_rms_refused"] = str(exc)
+                L += [f"`{v}`: no peak RMS: {exc}.", ""]
             rows = repeatability(runs)
             if rows:
                 table[v]["repeatability"] = rows  # into table.json too
