@@ -680,8 +680,8 @@ def test_nhc_and_odometer_reach_half_a_millimetre(tmp_path, fmu_dir):
     1 mm / 0.5 mm across the rail, the NHC with the play as shaping states) keeps the RMS over
     runs of the max chord error <= 0.5 mm, alignment and level; the prediction is conservative
     (the wobble is one sinusoid, narrower than the filter's play process) but not by more than
-    2.5 times. 16 runs (75 s: 0.367 / 0.199 mm, predicted 0.599 / 0.388); over 500 runs (29 min): 0.352 / 0.198 mm, predicted 0.599 /
-    0.389. Seeds 1-8: 0.382 / 0.198 mm; the white NHC (3 mm/s) gave 1.56 / 1.44 mm."""
+    2.5 times. 16 runs (75 s): 0.367 / 0.199 mm, predicted 0.599 / 0.388; over 500 runs
+    (29 min): 0.352 / 0.198 mm, predicted 0.599 / 0.389. The white NHC (3 mm/s) gave 1.56 / 1.44 mm."""
     from experiments.study import run_study
 
     table = run_study("trolley_survey", tmp_path, variants=["zupt_nhc_odometer"], runs=16, log=sys.stderr)
