@@ -336,10 +336,7 @@ class FilterModel:
         3)``, ``v_n`` ``(M, 3)``) and, in rows y, z, the play's ``v_s (y', z')`` with ``v_s``
         the nominal body-x speed (``RailPlay.velocity_rows``)."""
         C, v = np.asarray(C_bn, dtype=float), np.asarray(v_n, dtype=float)
-        H = np.zeros((C.shape[0], 3, self.n))
-        CT = C.transpose(0, 2, 1)
-        H[:, :, PHI] = -CT @ skews(v)
-        H[:, :, DV] = CT
+        H = self._pad(self.nav.body_velocity_rows(C, v))
         if self.play:
             H[:, 1:, self.n_nav:] = self.play.velocity_rows(np.einsum("ki,ki->k", C[:, :, 0], v))
         return H

@@ -102,14 +102,8 @@ _GL_X = 0.5 * (1.0 + np.array([-math.sqrt(0.6), 0.0, math.sqrt(0.6)]))
 _GL_W = np.array([5.0, 8.0, 5.0]) / 18.0
 
 
-def skew(v) -> np.ndarray:
-    """``[v x]``: the matrix with ``[v x] u = v x u``."""
-    x, y, z = v
-    return np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
-
-
 def skews(v) -> np.ndarray:
-    """``[v x]`` of each row of ``v`` ``(M, 3)`` -> ``(M, 3, 3)``."""
+    """``[v x]`` (the matrix with ``[v x] u = v x u``) of each row of ``v`` ``(M, 3)`` -> ``(M, 3, 3)``."""
     v = np.asarray(v, dtype=float)
     S = np.zeros((v.shape[0], 3, 3))
     S[:, 0, 1], S[:, 0, 2], S[:, 1, 2] = -v[:, 2], v[:, 1], -v[:, 0]
@@ -293,12 +287,14 @@ class ErrorModel:
             v~^b - v^b = -C_n^b [v^n x] phi + C_n^b dv
 
         The non-holonomic constraint uses rows y, z (``z = v~^b_{y,z} - 0``); the odometer
-        row x (``z = v~^b_x - v_odometer``)."""
-        C = np.asarray(C_bn, dtype=float)
-        H = np.zeros((3, self.n))
-        H[:, PHI] = -C.T @ skew(v_n)
-        H[:, DV] = C.T
-        return H
+        row x (``z = v~^b_x - v_odometer``). One epoch (``C_bn`` (3, 3), ``v_n`` (3,)) gives
+        (3, n); ``M`` epochs (``(M, 3, 3)``, ``(M, 3)``) give ``(M, 3, n)``."""
+        C, v = np.asarray(C_bn, dtype=float), np.asarray(v_n, dtype=float)
+        CT = C.reshape(-1, 3, 3).transpose(0, 2, 1)
+        H = np.zeros((CT.shape[0], 3, self.n))
+        H[:, :, PHI] = -CT @ skews(v.reshape(-1, 3))
+        H[:, :, DV] = CT
+        return H[0] if C.ndim == 2 else H
 
 
 # -- closed-loop feedback: the navigation corrected by an error estimate ------------------------
