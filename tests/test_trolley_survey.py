@@ -531,6 +531,16 @@ def test_paper_run_is_the_papers_nominal_run(paper_run):
     assert m["predicted_peak_sigma_level_mm"] == pytest.approx(sz.max(), rel=0.08)
 
 
+def test_a_run_without_seed_predicts_the_same_every_time(tmp_path, fmu_dir):
+    """The prediction samples the smoother's error distribution: without ``--seed`` its draws
+    take seed 0, so the same command writes the same metrics.json (it drew fresh numbers each
+    time before)."""
+    ms = [run_experiment("trolley_survey", "paper_montecarlo", out=tmp_path / f"r{i}", progress=False,
+                         log=io.StringIO()) for i in range(2)]
+    for key in ("predicted_sigma_alignment_mm", "predicted_sigma_level_mm", "predicted_peak_sigma_level_mm"):
+        assert ms[0][key] == ms[1][key]
+
+
 def test_paper_run_chord_errors_from_its_files(paper_run):
     """The chord metrics of a paper_montecarlo run, recomputed from signals.csv and
     estimates_smoother.csv by hand: the one 30 m chord from the record samples nearest to

@@ -13,7 +13,7 @@ Per run (:func:`chord_metrics`), from the offline observer ``smoother``
   ``chord_alignment_rms_error_mm``, ``chord_level_rms_error_mm``;
 * the prediction of that statistic from the smoother's joint Gaussian of the errors:
   :data:`PREDICTION_SAMPLES` draws at the grid's epochs (``smoother.error_samples``, seeded by
-  the run's seed) through the same exact chord errors, ``sqrt(mean max^2)``
+  the run's seed, 0 without one) through the same exact chord errors, ``sqrt(mean max^2)``
   (:func:`estimators.chord_accuracy.survey_chords` does both):
   ``predicted_sigma_alignment_mm``, ``predicted_sigma_level_mm`` (over a Monte Carlo the mean of
   the per-run predictions sits beside the RMS over runs of the max errors);
@@ -89,7 +89,8 @@ class SurveyRun:
         self.grid: ChordGrid | None = None
         try:
             survey = survey_chords(self.distance, self.positions, self.error, self.t, self.obs, PREDICTION_SAMPLES,
-                                   run.base.get("seed"))
+                                   # a run without --seed still gets the same draws every time
+                                   run.base.get("seed") or 0)
         except ValueError:  # a run shorter than one grid spacing
             return
         if survey.grid.n_points:
