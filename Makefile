@@ -1,16 +1,16 @@
 # One command sets up and runs the main job (`make run`); one sets up and runs the tests
-# (`make test`). Both create .venv on first use.
+# (`make test`). Both create .venv on first use, from the exact versions of requirements.lock.
 PYTHON ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
 OUT ?= out
 
-.PHONY: setup build run test test-slow bench clean
+.PHONY: setup build run test test-slow test-latest lint-imports lock bench clean
 
-$(BIN)/railfmu: pyproject.toml
+$(BIN)/railfmu: pyproject.toml requirements.lock
 	$(PYTHON) -m venv $(VENV)
-	$(BIN)/pip install --quiet --upgrade pip
-	$(BIN)/pip install --quiet -e '.[test]'
+	$(BIN)/pip install --quiet -r requirements.lock
+	$(BIN)/pip install --quiet --no-deps -e .
 	touch $@
 
 setup: $(BIN)/railfmu
@@ -21,11 +21,29 @@ build: setup
 run: build
 	$(BIN)/railfmu run lateral_alignment --master container --out $(OUT)/lateral_alignment
 
-test: setup
+# import-linter reads the package as installed (it cannot follow the package-dir mapping).
+lint-imports: setup
+	rm -rf build/lint-imports
+	$(BIN)/pip install --quiet --no-deps --target build/lint-imports .
+	cd build/lint-imports && PYTHONPATH=. ../../$(BIN)/lint-imports --no-cache --config ../../pyproject.toml
+
+test: lint-imports
 	$(BIN)/python -m pytest -q
 
 test-slow: setup
 	$(BIN)/python -m pytest -q -m slow
+
+# The newest releases of every dependency instead of the lock: how the next refresh would fare.
+test-latest:
+	$(PYTHON) -m venv .venv-latest
+	.venv-latest/bin/pip install --quiet --upgrade pip
+	.venv-latest/bin/pip install --quiet --upgrade --upgrade-strategy eager -e '.[test]'
+	.venv-latest/bin/python -m pytest -q
+
+# Refresh the lock (needs uv: pip install uv), then run `make test` and commit both.
+lock:
+	uv pip compile pyproject.toml --extra test --python-version 3.11 -o requirements.lock -q --no-header
+	sed -i '1i # Exact versions for `make test` and `make run` (Python 3.11, Linux). Refresh: `make lock`\n# (uv pip compile pyproject.toml --extra test --python-version 3.11 -o requirements.lock).' requirements.lock
 
 bench: build
 	$(BIN)/python benchmarks/step_cost.py
@@ -38,4 +56,4 @@ bench: build
 	$(BIN)/python benchmarks/trolley_filter.py
 
 clean:
-	rm -rf build $(OUT) .pytest_cache
+	rm -rf build dist $(OUT) .pytest_cache

@@ -1,13 +1,13 @@
-"""Speed of the three masters of fmus.cosim.masters against FMPy's own SSP simulator.
+"""Speed of the three masters of railfmu.fmus.cosim.masters against FMPy's own SSP simulator.
 
 The experiment experiments/track_wheelset, variant psd (ERRI B176 low-level track into the
 wheelset + suspended frame, 11 recorded signals), 20 s at 1 ms, through
 
-  jacobi        fmus.cosim.masters.run(system, "jacobi")        (Python loop, raw ctypes calls)
-  gauss-seidel  fmus.cosim.masters.run(system, "gauss-seidel")
-  container     fmus.cosim.masters.run(system, "container")     (FMPy container FMU + C driver)
+  jacobi        railfmu.fmus.cosim.masters.run(system, "jacobi")        (Python loop, raw ctypes calls)
+  gauss-seidel  railfmu.fmus.cosim.masters.run(system, "gauss-seidel")
+  container     railfmu.fmus.cosim.masters.run(system, "container")     (FMPy container FMU + C driver)
   simulate_ssp  fmpy.ssp.simulation.simulate_ssp on the same system written as a .ssp
-                (fmus.ssp.write_ssp; it ignores parameter bindings, which here equal the
+                (railfmu.fmus.ssp.write_ssp; it ignores parameter bindings, which here equal the
                 FMU defaults, so it runs the same system)
 
 Each is timed end to end (load, initialise, run, free: what a user waits for) and on a
@@ -37,9 +37,9 @@ import fmpy
 import numpy as np
 from fmpy.ssp.simulation import simulate_ssp
 
-from fmus.generate.build import build_all
-from fmus.cosim.masters import MASTERS, run
-from fmus.ssp import read_system, write_ssp
+from railfmu.fmus.generate.build import build_all
+from railfmu.fmus.cosim.masters import MASTERS, run
+from railfmu.fmus.ssp import read_system, write_ssp
 
 SHORT = 0.1  # s, the run that measures setup
 

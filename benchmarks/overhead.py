@@ -49,7 +49,7 @@ def _split(wall: float, timing: dict) -> dict:
 
 
 def member(experiment: str, variant: str, master: str, repeat: int) -> list[dict]:
-    from experiments.runner import run_experiment
+    from railfmu.experiments.engine.runner import run_experiment
 
     def once(seed: int) -> dict:
         t0 = time.perf_counter()
@@ -66,7 +66,7 @@ def main_job(repeat: int) -> list[dict]:
     for _ in range(repeat):
         with tempfile.TemporaryDirectory() as tmp:
             t0 = time.perf_counter()
-            res = subprocess.run([sys.executable, "-m", "experiments.cli", "run", "lateral_alignment", "--master",
+            res = subprocess.run([sys.executable, "-m", "railfmu.experiments.engine.cli", "run", "lateral_alignment", "--master",
                                   "container", "--out", tmp], cwd=ROOT, capture_output=True, text=True)
             wall = time.perf_counter() - t0
             if res.returncode != 0:
@@ -88,7 +88,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--out", type=Path, default=ROOT / "build" / "benchmarks" / "overhead.json")
     args = ap.parse_args(argv)
 
-    from fmus.generate.build import build_all
+    from railfmu.fmus.generate.build import build_all
 
     build_all()  # a no-op when up to date
     exp, _, variant = args.member.partition("/")

@@ -41,11 +41,11 @@ if str(ROOT) not in sys.path:  # run as a script from anywhere
 import numpy as np  # noqa: E402
 from fmpy.fmi2 import fmi2False  # noqa: E402
 
-from estimators.running_resistance import PaperUKF  # noqa: E402
-from experiments.fmu_process import FmuPaperUKF, process_model  # noqa: E402
-from fmus.cosim.masters import run  # noqa: E402
-from fmus.cosim.system import Component, Connection, System  # noqa: E402
-from fmus.generate.build import DEFAULT_OUT, build_all  # noqa: E402
+from railfmu.estimators.train.running_resistance import PaperUKF  # noqa: E402
+from railfmu.experiments.engine.fmu_process import FmuPaperUKF, process_model  # noqa: E402
+from railfmu.fmus.cosim.masters import run  # noqa: E402
+from railfmu.fmus.cosim.system import Component, Connection, System  # noqa: E402
+from railfmu.fmus.generate.build import build_all, default_out  # noqa: E402
 
 DT = 10.0  # s, the GNSS period
 
@@ -127,7 +127,7 @@ def main() -> int:
     args = ap.parse_args()
     repeats = 2 if args.quick else args.repeats
     n_calls = 200 if args.quick else 1000
-    fmu_dir = args.fmu_dir or build_all(DEFAULT_OUT) and DEFAULT_OUT
+    fmu_dir = args.fmu_dir or build_all(default_out()) and default_out()
     t, z, s_true, v_true = gnss_run(fmu_dir)
 
     # sigma points as the filter draws them at a fix in the middle of the run

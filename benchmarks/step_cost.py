@@ -42,7 +42,7 @@ import fmpy  # noqa: E402
 from fmpy import extract, read_model_description  # noqa: E402
 from fmpy.fmi2 import FMU2Slave  # noqa: E402
 
-from fmus.generate.build import build_all, fmi_header_dir  # noqa: E402
+from railfmu.fmus.generate.build import build_all, fmi_header_dir  # noqa: E402
 
 STEP = 1e-3  # communication step, s
 MAX_SIM_TIME = 300.0  # s; the wheelset's free decay reaches denormal numbers after ~600 s,
@@ -60,7 +60,7 @@ class Case:
 
 
 def cases() -> list[Case]:
-    from models.wheelset import WHEELSET
+    from railfmu.models.vehicle.wheelset import WHEELSET
 
     h_int = WHEELSET.integrator_step
     n_sub = math.ceil(STEP / h_int - 1e-9)
@@ -211,7 +211,7 @@ def main(argv: list[str] | None = None) -> int:
                     help="communication steps per timed run (default 20000, --quick 2000)")
     ap.add_argument("--quick", action="store_true", help="fewer steps and repeats (a smoke run)")
     ap.add_argument("--fmu-dir", type=Path, default=None,
-                    help="folder with the built FMUs (default: build them into build/fmus)")
+                    help="folder with the built FMUs (default: build them into the per-user cache)")
     ap.add_argument("--out", type=Path, default=ROOT / "build" / "benchmarks" / "step_cost.json")
     args = ap.parse_args(argv)
     steps = args.steps if args.steps is not None else (2000 if args.quick else 20000)

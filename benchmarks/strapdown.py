@@ -14,7 +14,7 @@ Timed (fastest of --repeat, on a fresh INS each time):
                         before timing), to a pandas trajectory
 
 and the largest position, velocity and attitude error of each against the simulator's truth.
-Then the JIT warm-up: a fresh process imports :mod:`estimators.strapdown` and integrates 10
+Then the JIT warm-up: a fresh process imports :mod:`railfmu.estimators.inertial.strapdown` and integrates 10
 samples, once with an empty numba cache (compiling) and once with the cache that run left
 (``NUMBA_CACHE_DIR`` pointed at a temporary directory, so the repository's own cache is untouched).
 
@@ -40,10 +40,10 @@ if str(ROOT) not in sys.path:
 
 import numpy as np  # noqa: E402
 
-from estimators.attitude import dcm_from_rph  # noqa: E402
-from estimators.ins_observer import StrapdownINS  # noqa: E402
-from estimators.strapdown import Strapdown  # noqa: E402
-from models import earth  # noqa: E402
+from railfmu.estimators.inertial.attitude import dcm_from_rph  # noqa: E402
+from railfmu.estimators.inertial.ins_observer import StrapdownINS  # noqa: E402
+from railfmu.estimators.inertial.strapdown import Strapdown  # noqa: E402
+from railfmu.models import earth  # noqa: E402
 
 DEG = math.pi / 180
 
@@ -86,7 +86,7 @@ FIRST_CALL = """
 import time
 t0 = time.perf_counter()
 import numpy as np
-from estimators.strapdown import Strapdown
+from railfmu.estimators.inertial.strapdown import Strapdown
 t1 = time.perf_counter()
 Strapdown.from_rph(0.5, 2.0, 30.0, (0, 0, 0), (0, 0, 0), 0.005).integrate(np.zeros((10, 6)))
 print(t1 - t0, time.perf_counter() - t1)

@@ -44,8 +44,8 @@ TOLERANCE_SIGMA = 0.05
 
 def fixes(fmu_dir: Path, gnss_period: float, seed: int = 1) -> tuple[np.ndarray, np.ndarray]:
     """(t, z = (position, speed)) of the GNSS fixes of one run."""
-    from fmus.cosim.masters import run
-    from fmus.cosim.system import Component, Connection, System
+    from railfmu.fmus.cosim.masters import run
+    from railfmu.fmus.cosim.system import Component, Connection, System
 
     system = System(
         "train_run",
@@ -67,9 +67,17 @@ def filterpy_run(t: np.ndarray, z: np.ndarray, effort: np.ndarray, dt: float) ->
     """filterpy's UKF at the paper's settings with PaperUKF's discrete process and efforts."""
     from filterpy.kalman import MerweScaledSigmaPoints, UnscentedKalmanFilter
 
-    from estimators.running_resistance import (PAPER_ALPHA, PAPER_BETA, PAPER_KAPPA, PAPER_SIGMA_S,
-                                               PAPER_SIGMA_V, PAPER_SIGMAS, LineTerm, discrete_process)
-    from models.train_longitudinal import R0, R1, R2
+    from railfmu.estimators.train.running_resistance import (
+        PAPER_ALPHA,
+        PAPER_BETA,
+        PAPER_KAPPA,
+        PAPER_SIGMA_S,
+        PAPER_SIGMA_V,
+        PAPER_SIGMAS,
+        LineTerm,
+        discrete_process,
+    )
+    from railfmu.models.train.longitudinal import R0, R1, R2
 
     proc = discrete_process(LineTerm())
     k = UnscentedKalmanFilter(5, 2, dt, hx=lambda x: x[:2],
@@ -104,13 +112,13 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--out", type=Path, default=ROOT / "build" / "benchmarks" / "train_ukf.json")
     args = ap.parse_args(argv)
 
-    from estimators.running_resistance import ImprovedEstimator, PaperUKF
-    from fmus.generate.build import DEFAULT_OUT, build_all
+    from railfmu.estimators.train.running_resistance import ImprovedEstimator, PaperUKF
+    from railfmu.fmus.generate.build import build_all, default_out
 
     fmu_dir = args.fmu_dir
     if fmu_dir is None:
-        build_all(DEFAULT_OUT)  # a no-op when up to date
-        fmu_dir = DEFAULT_OUT
+        build_all(default_out())  # a no-op when up to date
+        fmu_dir = default_out()
     dt = args.gnss_period
     t, z = fixes(fmu_dir, dt)
     n = len(t)

@@ -42,9 +42,15 @@ if str(ROOT) not in sys.path:
 import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 
-from estimators.aided_ins import AidedInsSmoother  # noqa: E402
-from models import earth  # noqa: E402
-from models.imu_errors import GM_SIGMA_PER_B, GRADES, GYRO_BIAS_SI, GYRO_NOISE_SI, ACCEL_SI  # noqa: E402
+from railfmu.estimators.inertial.aided_ins import AidedInsSmoother  # noqa: E402
+from railfmu.models import earth  # noqa: E402
+from railfmu.models.inertial.imu_errors import (
+    GM_SIGMA_PER_B,
+    GRADES,
+    GYRO_BIAS_SI,
+    GYRO_NOISE_SI,
+    ACCEL_SI,
+)  # noqa: E402
 
 DT = 0.005
 ZUPT_SIGMA = 1e-4     # m/s
@@ -55,7 +61,7 @@ AXES = ("dtheta_x", "dtheta_y", "dtheta_z", "dv_x", "dv_y", "dv_z")
 
 def survey(stop_time: float, out: Path) -> tuple[np.ndarray, np.ndarray, pd.DataFrame]:
     """(t, increments (n, 6), truth) of the navigation-grade survey run to ``stop_time``."""
-    from experiments.runner import run_experiment
+    from railfmu.experiments.engine.runner import run_experiment
     run_experiment("trolley_survey", "navigation_grade", out=out, stop_time=stop_time, step_size=DT,
                    master="container", progress=False, log=io.StringIO())
     imu = pd.read_csv(out / "imu.csv")

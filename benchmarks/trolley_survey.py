@@ -37,16 +37,16 @@ if str(ROOT) not in sys.path:
 
 import numpy as np  # noqa: E402
 
-from estimators.ins_observer import StrapdownINS  # noqa: E402
-from experiments.trolley_survey import INCREMENTS, NAV, navigation_errors  # noqa: E402
+from railfmu.estimators.inertial.ins_observer import StrapdownINS  # noqa: E402
+from railfmu.experiments.trolley_survey import INCREMENTS, NAV, navigation_errors  # noqa: E402
 
 BAR_S = 10.0  # issue 13: simulated and processed by the INS in <= 10 s wall
 
 
 def simulate(variant: str, step: float | None):
     """One container run of the survey's FMUs: (seconds, columns -> arrays)."""
-    from experiments.runner import find_experiment, load_system
-    from fmus.cosim.masters import run
+    from railfmu.experiments.engine.runner import find_experiment, load_system
+    from railfmu.fmus.cosim.masters import run
 
     system = load_system(find_experiment("trolley_survey"), variant, step_size=step)
     system.observers = []  # the INS is timed on its own below
@@ -79,8 +79,8 @@ def main(argv=None) -> int:
     ap.add_argument("--full", action="store_true", help="also time `railfmu run` with its files")
     ap.add_argument("--out", type=Path, default=ROOT / "build" / "benchmarks" / "trolley_survey.json")
     args = ap.parse_args(argv)
-    from fmus.generate.build import DEFAULT_OUT, build_all
-    build_all(DEFAULT_OUT)
+    from railfmu.fmus.generate.build import build_all, default_out
+    build_all(default_out())
 
     sim_s, sig, dt = min((simulate(args.variant, args.step_size) for _ in range(args.repeat)), key=lambda r: r[0])
     t = sig["time"]
@@ -116,7 +116,7 @@ def main(argv=None) -> int:
         rows["python-ins (numba)"] = {"seconds": py_s, "us_per_step": py_s / n * 1e6,
                                       **dict(zip(("position_m", "attitude_rad"), errors(out, truth)))}
     if args.full:
-        from experiments.runner import run_experiment
+        from railfmu.experiments.engine.runner import run_experiment
         with tempfile.TemporaryDirectory() as tmp:
             t0 = time.perf_counter()
             m = run_experiment("trolley_survey", args.variant, out=Path(tmp) / "run", master="container",

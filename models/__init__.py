@@ -4,23 +4,23 @@ Imports numpy/scipy/sympy only. Each model is the single source for its FMU (fmu
 any estimator's design model (estimators/).
 """
 
-from .base import Input, Model, Output, Parameter, State, Variable
+from railfmu.models.base import Input, Model, Output, Parameter, State, Variable
 
 
 def all_models() -> list[Model]:
     """Every model that is built into an FMU, in build order."""
-    from .coach_vertical import COACH_VERTICAL
-    from .driver import DRIVER
-    from .gnss import GNSS_RECEIVER
-    from .imu_errors import IMU_ERRORS
-    from .sensors import SENSORS
-    from .signal_table import SIGNAL_TABLE
-    from .step_source import STEP_SOURCE
-    from .track import TRACK
-    from .vehicle_lateral import VEHICLE_LATERAL
-    from .train_longitudinal import TRAIN_LONGITUDINAL
-    from .trolley import TROLLEY
-    from .wheelset import WHEELSET
+    from railfmu.models.vehicle.coach_vertical import COACH_VERTICAL
+    from railfmu.models.train.driver import DRIVER
+    from railfmu.models.train.gnss import GNSS_RECEIVER
+    from railfmu.models.inertial.imu_errors import IMU_ERRORS
+    from railfmu.models.sources.sensors import SENSORS
+    from railfmu.models.sources.signal_table import SIGNAL_TABLE
+    from railfmu.models.sources.step_source import STEP_SOURCE
+    from railfmu.models.track.irregularity import TRACK
+    from railfmu.models.vehicle.vehicle_lateral import VEHICLE_LATERAL
+    from railfmu.models.train.longitudinal import TRAIN_LONGITUDINAL
+    from railfmu.models.inertial.trolley import TROLLEY
+    from railfmu.models.vehicle.wheelset import WHEELSET
 
     return [TRACK, WHEELSET, COACH_VERTICAL, STEP_SOURCE, SENSORS, VEHICLE_LATERAL, SIGNAL_TABLE,
             TRAIN_LONGITUDINAL, GNSS_RECEIVER, DRIVER, IMU_ERRORS, TROLLEY]

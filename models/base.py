@@ -2,7 +2,7 @@
 
 A :class:`Model` is the single source for
 
-* its FMU: ``fmus.codegen`` turns the variables into ``modelDescription.xml`` and the
+* its FMU: ``railfmu.fmus.generate.codegen`` turns the variables into ``modelDescription.xml`` and the
   equations into C (sympy ``ccode``);
 * Python: :meth:`Model.rhs` and :meth:`Model.outputs` lambdify the same expressions, so a
   test can solve the definition with scipy and compare it with the compiled FMU, and an

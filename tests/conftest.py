@@ -5,13 +5,13 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 import pytest  # noqa: E402
 
-from fmus.generate.build import DEFAULT_OUT, build_all  # noqa: E402
+from railfmu.fmus.generate.build import build_all, default_out  # noqa: E402
 
 
 @pytest.fixture(scope="session")
 def fmu_dir():
-    """Every FMU, built into build/fmus as `railfmu build` does (the CLI tests use the same
+    """Every FMU, built into the per-user cache as `railfmu build` does (the CLI tests use the same
     folder): rebuilt when any model definition, the generator or the runtime changed
-    (fmus.generate.build.definition_key), so a fresh clone builds everything once."""
-    build_all(DEFAULT_OUT)
-    return DEFAULT_OUT
+    (railfmu.fmus.generate.build.definition_key), so a fresh clone builds everything once."""
+    build_all(default_out())
+    return default_out()

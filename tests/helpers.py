@@ -1,13 +1,13 @@
 """Data from the real FMUs for estimator tests: the track -> wheelset system through the
-Jacobi master (fmus.cosim.masters), as `railfmu run track_wheelset` couples it."""
+Jacobi master (railfmu.fmus.cosim.masters), as `railfmu run track_wheelset` couples it."""
 
 from pathlib import Path
 
 import numpy as np
 
-from fmus.cosim.masters import run
-from fmus.cosim.recorder import CsvRecorder
-from fmus.cosim.system import Component, Connection, System
+from railfmu.fmus.cosim.masters import run
+from railfmu.experiments.engine.recorder import CsvRecorder
+from railfmu.fmus.cosim.system import Component, Connection, System
 
 SENSORS = ("ddy", "dpsi", "ddy_f")
 

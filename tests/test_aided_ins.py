@@ -1,6 +1,6 @@
 """The ZUPT-aided INS smoother (estimators/aided_ins.py) on the trolley survey's record
 (navigation grade, 150 s: 10 s rest, stops every 60 m): the ideal IMU's numerical floor, the
-open-loop filter + RTS against estimators.smoothers.rts, closed loop against open loop, the
+open-loop filter + RTS against railfmu.estimators.core.smoothers.rts, closed loop against open loop, the
 sampled smoothing errors against the brute-force joint covariance, the filter's consistency
 over a Monte Carlo of IMU error seeds, the aiding options, the wheel-rail play as shaping-filter
 states (zero play is the white NHC; on the wobbling trolley it beats it), the memory budget and
@@ -17,12 +17,12 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from estimators.aided_ins import AidedInsSmoother, covariance_analysis
-from estimators.attitude import dcm_from_rph
-from estimators.ins_error_model import DR, ErrorModel
-from estimators.smoothers import rts
-from models import earth
-from models.imu_errors import GRADES, ImuErrorsTwin
+from railfmu.estimators.inertial.aided_ins import AidedInsSmoother, covariance_analysis
+from railfmu.estimators.inertial.attitude import dcm_from_rph
+from railfmu.estimators.inertial.ins_error_model import DR, ErrorModel
+from railfmu.estimators.core.smoothers import rts
+from railfmu.models import earth
+from railfmu.models.inertial.imu_errors import GRADES, ImuErrorsTwin
 
 DEG = math.pi / 180
 DT = 0.005
@@ -35,7 +35,7 @@ def record(tmp_path_factory, fmu_dir):
     the truth, the stopped flag and the odometer)."""
     if shutil.which("gcc") is None or fmpy.platform != "linux64":
         pytest.skip("needs gcc on linux64")
-    from experiments.runner import run_experiment
+    from railfmu.experiments.engine.runner import run_experiment
     out = tmp_path_factory.mktemp("survey150")
     run_experiment("trolley_survey", "navigation_grade", out=out, stop_time=150.0, step_size=DT,
                    master="container", progress=False, log=io.StringIO())
@@ -80,7 +80,7 @@ def test_ideal_imu_floor(record):
 
 def test_open_loop_filter_and_rts_are_smoothers_rts(record):
     """Without feedback the forward pass is the textbook filter around the free INS: its record
-    (x+, P+, Phi, x-, P-) given to estimators.smoothers.rts (independent code, one epoch at a
+    (x+, P+, Phi, x-, P-) given to railfmu.estimators.core.smoothers.rts (independent code, one epoch at a
     time, spd_inverse) gives our smoothed errors and covariances to 1e-9 of their scale."""
     obs, _ = run(record, n=8001, feedback=False)
     st = obs._store
@@ -184,7 +184,7 @@ def test_covariance_analysis_gives_the_papers_level_closed_form(bias_ug):
     sigma from joint_covariance equals it within 1e-4 mm (measured 4e-5 mm of up to 0.29 mm:
     the Coriolis and gravity-gradient terms the closed form drops), in the regime where the
     bias is well determined (50 ug) and where both terms of the denominator count (0.45 ug)."""
-    from models.imu_errors import ACCEL_SI, GM_SIGMA_PER_B
+    from railfmu.models.inertial.imu_errors import ACCEL_SI, GM_SIGMA_PER_B
     T, Tc, sv, k = 0.05, 30.0, 1e-4, 1.0 / 6.0
     t = np.arange(0, Tc + T / 2, T)
     N = len(t)
@@ -312,7 +312,7 @@ def test_zupt_interval_and_counts(record):
 
 
 def test_zupt_from_the_detector(record):
-    """zupt_source="detector": the stops come from estimators.zupt_detector on the increments;
+    """zupt_source="detector": the stops come from railfmu.estimators.inertial.zupt_detector on the increments;
     its misses and false alarms against the stopped flag are in finish(). Measured on the
     150 s record: 26 missed samples at rest, 9 false alarms, no stop lost; the ZUPT epochs
     differ by 3 of 403 and the smoothed positions by < 0.1 mm."""
@@ -383,7 +383,7 @@ def wobbling(tmp_path_factory, fmu_dir):
     mm vertically with a 2 m wavelength; two 60 m runs, four 30 m chords."""
     if shutil.which("gcc") is None or fmpy.platform != "linux64":
         pytest.skip("needs gcc on linux64")
-    from experiments.runner import run_experiment
+    from railfmu.experiments.engine.runner import run_experiment
     out = tmp_path_factory.mktemp("wobble150")
     run_experiment("trolley_survey", "zupt_nhc_odometer", out=out, stop_time=150.0, seed=1, progress=False,
                    log=io.StringIO())
@@ -398,7 +398,7 @@ def test_shaping_play_beats_the_white_nhc_on_a_wobbling_trolley(wobbling):
     shaping 0.49 / 0.37 mm: 2.4 / 2.3 times); with the variants' narrowband play (damping 0.1:
     the wobble is one sinusoid) smaller again (measured 0.21 / 0.16 mm). The play states'
     smoothed lateral offset follows the true wobble (correlation > 0.9 while cruising)."""
-    from estimators.chord_accuracy import survey_chords
+    from railfmu.estimators.inertial.chord_accuracy import survey_chords
     d = wobbling
     common = dict(error_model="full15", nhc=True, odometer=True)
     play = dict(play_model="shaping", play_sigma_lateral=1e-3 / math.sqrt(2), play_sigma_vertical=5e-4 / math.sqrt(2),

@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 from helpers import track_wheelset_signals
 
-from estimators.alignment import AlignmentKalmanFilter
-from estimators.metrics import BANDS, alignment_errors, rms
-from models.wheelset import WHEELSET
+from railfmu.estimators.track.alignment import AlignmentKalmanFilter
+from railfmu.estimators.track.metrics import BANDS, alignment_errors, rms
+from railfmu.models.vehicle.wheelset import WHEELSET
 
 DT = 1e-3
 V = 20.0

@@ -14,7 +14,7 @@ EXPERIMENT = Path(__file__).resolve().parents[1] / "experiments" / "track_wheels
 
 
 def railfmu(*args, cwd=None):
-    return subprocess.run([sys.executable, "-m", "experiments.cli", *args], capture_output=True,
+    return subprocess.run([sys.executable, "-m", "railfmu.experiments.engine.cli", *args], capture_output=True,
                           text=True, cwd=cwd)
 
 
@@ -169,7 +169,7 @@ def test_an_interrupted_run_keeps_complete_rows_and_says_so(tmp_path):
     out = tmp_path / "run"
     # 200 s (about 30 s of wall time): the signal must land while the run is still going, also
     # on a loaded machine (20 s once finished first, and the message was the post-processing's)
-    proc = subprocess.Popen([sys.executable, "-m", "experiments.cli", "run", "track_wheelset", "--stop-time", "200",
+    proc = subprocess.Popen([sys.executable, "-m", "railfmu.experiments.engine.cli", "run", "track_wheelset", "--stop-time", "200",
                              "--out", str(out)], stderr=subprocess.PIPE, text=True)
     deadline = time.monotonic() + 60
     while time.monotonic() < deadline:  # wait until the run is well under way

@@ -7,8 +7,8 @@ import pytest
 from scipy.integrate import solve_ivp
 from scipy.linalg import logm
 
-from fmus.cosim.slave import Slave
-from models.coach_vertical import (
+from railfmu.fmus.cosim.slave import Slave
+from railfmu.models.vehicle.coach_vertical import (
     COACH_VERTICAL,
     K1_NOMINAL,
     MODES,

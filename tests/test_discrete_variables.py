@@ -15,8 +15,8 @@ from fmpy import extract, read_model_description
 from fmpy.fmi1 import FMICallException
 from fmpy.fmi2 import FMU2Slave, fmi2LastSuccessfulTime, fmi2Terminated
 
-from fmus.generate.build import build_fmu, validate
-from models.base import Input, Model, Output, Parameter, State
+from railfmu.fmus.generate.build import build_fmu, validate
+from railfmu.models.base import Input, Model, Output, Parameter, State
 
 pytestmark = pytest.mark.skipif(shutil.which("gcc") is None or fmpy.platform != "linux64",
                                 reason="needs gcc on linux64")

@@ -9,12 +9,12 @@ import time
 import numpy as np
 import pytest
 
-from fmus.cosim.masters import run
-from fmus.cosim.slave import Slave
-from fmus.cosim.system import Component, Connection, System
-from models.driver import COAST, DriverTwin, uniform
-from models.line_profile import DEFAULT_LINE, LineProfile
-from models.train_longitudinal import Train
+from railfmu.fmus.cosim.masters import run
+from railfmu.fmus.cosim.slave import Slave
+from railfmu.fmus.cosim.system import Component, Connection, System
+from railfmu.models.train.driver import COAST, DriverTwin, uniform
+from railfmu.models.track.line_profile import DEFAULT_LINE, LineProfile
+from railfmu.models.train.longitudinal import Train
 
 # measured over seeds 1-30 (1 s steps, Jacobi: the driver acts on the train's position of the
 # previous step): stops 0.12 m short to 3.1 m past the stopping point; at most 0.81 km/h over

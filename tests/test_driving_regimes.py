@@ -12,15 +12,34 @@ import numpy as np
 import pytest
 from scipy.stats import theilslopes
 
-from estimators.driving_regimes import (BRAKING, COASTING, CRUISING, KMH, STANDSTILL, TRACTION,
-                                        feature_errors, feature_truth, features, final_durations,
-                                        interval_regimes, recognise, regime_accuracy,
-                                        reference_features, score, theil_sen_at,
-                                        true_regimes)
-from fmus.cosim import masters
-from fmus.cosim.system import Component, Connection, System
-from models.train_longitudinal import (GAMMA, LOAD_MASS, MAX_POWER, MAX_TRACTION_FORCE,
-                                       TARE_MASS)
+from railfmu.estimators.train.driving_regimes import (
+    BRAKING,
+    COASTING,
+    CRUISING,
+    KMH,
+    STANDSTILL,
+    TRACTION,
+    feature_errors,
+    feature_truth,
+    features,
+    final_durations,
+    interval_regimes,
+    recognise,
+    regime_accuracy,
+    reference_features,
+    score,
+    theil_sen_at,
+    true_regimes,
+)
+from railfmu.fmus.cosim import masters
+from railfmu.fmus.cosim.system import Component, Connection, System
+from railfmu.models.train.longitudinal import (
+    GAMMA,
+    LOAD_MASS,
+    MAX_POWER,
+    MAX_TRACTION_FORCE,
+    TARE_MASS,
+)
 from train_runs import sample, simulate
 
 TRAIN = {"max_power": MAX_POWER, "max_traction_force": MAX_TRACTION_FORCE, "tare_mass": TARE_MASS,

@@ -8,9 +8,9 @@ import pytest
 import scipy.linalg as sla
 from filterpy.kalman import KalmanFilter, unscented_transform as filterpy_ut
 
-from estimators import kalman, smoothers, ukf
-from estimators.discretize import foh, van_loan, zoh
-from estimators.metrics import rms
+from railfmu.estimators.core import kalman, smoothers, ukf
+from railfmu.estimators.core.discretize import foh, van_loan, zoh
+from railfmu.estimators.track.metrics import rms
 
 RNG = np.random.default_rng(20260530)
 

@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 from fmpy import simulate_fmu
 
-from fmus.generate.build import CFLAGS, validate
-from fmus.cosim.slave import FMUError, Slave
-from models import all_models
+from railfmu.fmus.generate.build import CFLAGS, validate
+from railfmu.fmus.cosim.slave import FMUError, Slave
+from railfmu.models import all_models
 
 MODELS = [m.identifier for m in all_models()]
 
@@ -104,7 +104,7 @@ def test_saved_state_reproduces_continuation_exactly(fmu_dir, ident):
 def test_outputs_are_computed_in_initialization_mode(fmu_dir):
     """Importers (libcosim) read the initial outputs before initialisation ends to pass
     them on: they must be computed from the parameters and inputs set so far."""
-    from models.wheelset import WHEELSET
+    from railfmu.models.vehicle.wheelset import WHEELSET
 
     with Slave(fmu_dir / "TrackIrregularity.fmu", "track") as s:
         s.enter_initialization(0.0, 1.0)

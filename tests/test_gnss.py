@@ -1,5 +1,5 @@
 """GnssReceiver FMU: fixes exactly every sample_period whatever the master's clock, equal to
-its Python twin, the position noise the counter-based Gaussian of models.sensors.noise and the
+its Python twin, the position noise the counter-based Gaussian of railfmu.models.sources.sensors.noise and the
 speed rounded to 1 km/h (Cunillera et al. (2022) §4.1-4.2)."""
 
 from __future__ import annotations
@@ -7,9 +7,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from fmus.cosim.slave import FMUError, Slave
-from models.gnss import Gnss
-from models.sensors import noise
+from railfmu.fmus.cosim.slave import FMUError, Slave
+from railfmu.models.train.gnss import Gnss
+from railfmu.models.sources.sensors import noise
 
 
 def truth(t):

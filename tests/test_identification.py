@@ -1,4 +1,4 @@
-"""estimators.identification: the exact first-order-hold SM response against the FMU, recovery
+"""railfmu.estimators.track.identification: the exact first-order-hold SM response against the FMU, recovery
 of known primary-suspension parameters, identification on complete-model (CM) data and the
 Q/R estimate of Muñoz et al., eqs. 28-31."""
 
@@ -7,10 +7,10 @@ import math
 import numpy as np
 import pytest
 
-from estimators import identification as idn
-from fmus.cosim.masters import run
-from fmus.cosim.system import Component, Connection, System
-from models.vehicle_lateral import VEHICLE_LATERAL
+from railfmu.estimators.track import identification as idn
+from railfmu.fmus.cosim.masters import run
+from railfmu.fmus.cosim.system import Component, Connection, System
+from railfmu.models.vehicle.vehicle_lateral import VEHICLE_LATERAL
 
 V = 20.0
 DT = 1e-3
@@ -53,7 +53,7 @@ def test_sm_response_is_fast():
 
 
 def test_identification_recovers_known_parameters():
-    from models.track import TrackIrregularity
+    from railfmu.models.track.irregularity import TrackIrregularity
 
     t = np.arange(5001) * DT
     tr = TrackIrregularity(TRACK).outputs(t)
@@ -120,14 +120,14 @@ def test_estimate_noise_positive_and_finite(cm_run):
     assert est.settings["sigma_acc"] >= 0.01
     assert est.Q.shape == (7, 7) and est.R.shape == (4, 4)
     assert np.all(np.linalg.eigvalsh(est.Q) > -1e-12 * np.abs(est.Q).max())
-    from estimators.alignment import AlignmentKalmanFilter
+    from railfmu.estimators.track.alignment import AlignmentKalmanFilter
 
     kf = AlignmentKalmanFilter(DT, V=V, **est.settings)  # the settings are accepted as they are
     assert kf.observability_rank() == 7
 
 
 def test_filter_matrices_match_the_alignment_filter():
-    from estimators.alignment import AlignmentKalmanFilter
+    from railfmu.estimators.track.alignment import AlignmentKalmanFilter
 
     kf = AlignmentKalmanFilter(DT, V=V, kx=6e5, cx=5e4)
     F_c, H = idn.filter_matrices({"kx": 6e5, "cx": 5e4, "V": V})

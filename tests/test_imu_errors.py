@@ -36,10 +36,10 @@ import numpy as np
 import pytest
 from lxml import etree
 
-from fmus.cosim.slave import FMUError, Slave
-from fmus.ssp.params import read_parameter_set
-from fmus.ssp.units import Units
-from models.imu_errors import (
+from railfmu.fmus.cosim.slave import FMUError, Slave
+from railfmu.fmus.ssp.params import read_parameter_set
+from railfmu.fmus.ssp.units import Units
+from railfmu.models.inertial.imu_errors import (
     ACCEL_SI,
     FLICKER_FLOOR,
     GM_ALLAN_PEAK,
@@ -57,7 +57,7 @@ from models.imu_errors import (
     gm_step,
     sample_index,
 )
-from models.sensors import noise
+from railfmu.models.sources.sensors import noise
 
 ROOT = Path(__file__).resolve().parents[1]
 PARAMETERS = ROOT / "experiments" / "trolley_survey" / "parameters"
@@ -147,7 +147,7 @@ def test_ideal_imu_passes_the_input_through_bit_for_bit(fmu_dir):
 
 
 def test_counter_based_noise_is_the_sensor_noise_of_models_sensors():
-    """gauss() is models.sensors.noise for any stream number (the same SplitMix64 streams)."""
+    """gauss() is railfmu.models.sources.sensors.noise for any stream number (the same SplitMix64 streams)."""
     k = np.arange(0, 5000, 7)
     for ch in (1, 5, 8):
         assert np.array_equal(gauss(13, ch, k), noise(13, ch, k))
@@ -397,7 +397,7 @@ def test_a_negative_noise_density_is_one_line_and_exit_2(fmu_dir, tmp_path, sett
     exp.mkdir()
     shutil.copy(fmu_dir / "ImuErrors.fmu", exp)
     (exp / "SystemStructure.ssd").write_text(IMU_SSD)
-    res = subprocess.run([sys.executable, "-m", "experiments.cli", "run", str(exp), "--set", setting,
+    res = subprocess.run([sys.executable, "-m", "railfmu.experiments.engine.cli", "run", str(exp), "--set", setting,
                           "--out", str(tmp_path / "out")], capture_output=True, text=True)
     assert res.returncode == 2, res.stderr
     errors = [line for line in res.stderr.splitlines() if line.startswith("railfmu: error:")]

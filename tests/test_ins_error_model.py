@@ -14,12 +14,21 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from estimators.attitude import dcm_from_rph, perturb
-from estimators.discretize import van_loan
-from estimators.ins_error_model import (DR, DV, PHI, ErrorModel, ImuGrade, attitude_error, corrected_position,
-                                        ned_difference, observability_gramian)
-from estimators.strapdown import Strapdown
-from models import earth
+from railfmu.estimators.inertial.attitude import dcm_from_rph, perturb
+from railfmu.estimators.core.discretize import van_loan
+from railfmu.estimators.inertial.ins_error_model import (
+    DR,
+    DV,
+    PHI,
+    ErrorModel,
+    ImuGrade,
+    attitude_error,
+    corrected_position,
+    ned_difference,
+    observability_gramian,
+)
+from railfmu.estimators.inertial.strapdown import Strapdown
+from railfmu.models import earth
 
 DEG = math.pi / 180
 LAT = 30.5 * DEG
@@ -80,7 +89,7 @@ def trolley(tmp_path_factory, fmu_dir):
     """45 s of the survey (10 s rest, 35 s pushed along the straight) at 5 ms: signals."""
     if shutil.which("gcc") is None or fmpy.platform != "linux64":
         pytest.skip("needs gcc on linux64")
-    from experiments.runner import run_experiment
+    from railfmu.experiments.engine.runner import run_experiment
     out = tmp_path_factory.mktemp("trolley45")
     run_experiment("trolley_survey", "ideal_imu", out=out, stop_time=45.0, step_size=0.005, master="container",
                    progress=False, log=io.StringIO())
@@ -92,13 +101,13 @@ def _ins(row, dr=(0.0, 0.0, 0.0), dv=(0.0, 0.0, 0.0), phi=(0.0, 0.0, 0.0)) -> St
                                      -np.asarray(dr))
     C = perturb(dcm_from_rph(row["trolley.roll"], row["trolley.pitch"], row["trolley.heading"]), -np.asarray(phi))
     v = np.array([row["trolley.vn"], row["trolley.ve"], row["trolley.vd"]]) + dv
-    from estimators.attitude import rph_from_dcm
+    from railfmu.estimators.inertial.attitude import rph_from_dcm
     return Strapdown.from_rph(float(lat), float(lon), float(h), v, rph_from_dcm(C), 0.005)
 
 
 def _epochs(ins: Strapdown, U: np.ndarray, m: int) -> list[tuple]:
     """The INS at every m-th sample: (lat, lon, h, v, C)."""
-    from estimators.aided_ins import _dcm
+    from railfmu.estimators.inertial.aided_ins import _dcm
     out = [(ins.lat, ins.lon, ins.h, np.array([ins.vn, ins.ve, ins.vd]), _dcm(tuple(ins.quaternion())))]
     for i in range(1, U.shape[0], m):
         ins.integrate(U[i:i + m])
@@ -239,7 +248,7 @@ def test_bad_grade_and_model_are_one_line():
 def test_turn_on_biases_are_random_constants_in_the_model():
     """The paper's "piecewise constant" biases: turn-on sigmas only -> P0 holds them, no process
     noise, no decay; both kinds -> P0 is the sum and the state a random walk of the GM intensity."""
-    from estimators.ins_error_model import ErrorModel, ImuGrade
+    from railfmu.estimators.inertial.ins_error_model import ErrorModel, ImuGrade
 
     const = ImuGrade(gyro_bias_instability_deg_h=0.0, accel_bias_instability_ug=0.0,
                      gyro_turn_on_bias_sigma_deg_h=0.01, accel_turn_on_bias_sigma_ug=50.0)

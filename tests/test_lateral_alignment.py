@@ -9,6 +9,8 @@ whole 0.17 / 0.19; resonance_case2 J = 0.17 / 0.11 mm. Muñoz et al.: 0.25, 0.48
 """
 
 import json
+import math
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -16,8 +18,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from estimators.alignment import AlignmentKalmanFilter
-from models.vehicle_lateral import first_lateral_mode
+from railfmu.estimators.track.alignment import AlignmentKalmanFilter
+from railfmu.models.vehicle.vehicle_lateral import first_lateral_mode
 
 EXP = Path(__file__).resolve().parents[1] / "experiments" / "lateral_alignment"
 BANDS = {"whole", "D1", "D2", "D3"}
@@ -25,7 +27,7 @@ BANDS = {"whole", "D1", "D2", "D3"}
 
 def run(tmp_path, variant, *extra):
     out = tmp_path / variant
-    res = subprocess.run([sys.executable, "-m", "experiments.cli", "run", "lateral_alignment", "--variant", variant,
+    res = subprocess.run([sys.executable, "-m", "railfmu.experiments.engine.cli", "run", "lateral_alignment", "--variant", variant,
                           "--master", "container", "--out", str(out), *extra], capture_output=True, text=True)
     assert res.returncode == 0, res.stderr
     return json.loads((out / "metrics.json").read_text()), out
@@ -61,7 +63,7 @@ def test_reduced_standard_run(tmp_path):
 
 
 def test_a_run_too_short_to_score_is_one_line(tmp_path):
-    res = subprocess.run([sys.executable, "-m", "experiments.cli", "run", "lateral_alignment", "--stop-time", "0.5",
+    res = subprocess.run([sys.executable, "-m", "railfmu.experiments.engine.cli", "run", "lateral_alignment", "--stop-time", "0.5",
                           "--master", "container", "--out", str(tmp_path)], capture_output=True, text=True)
     assert res.returncode == 2
     lines = [line for line in res.stderr.splitlines() if line.startswith("railfmu: error")]
@@ -72,12 +74,15 @@ def test_a_run_too_short_to_score_is_one_line(tmp_path):
 def test_resonance_wavelength_is_v_over_f1_of_the_complete_model():
     f1 = first_lateral_mode()[0]
     text = (EXP / "variants" / "resonance_case2.ssv").read_text()
-    assert f'name="track.harmonic_wavelength"><ssv:Real value="{20.0 / f1!r}"' in text
+    written = float(re.search(r'name="track.harmonic_wavelength"><ssv:Real value="([^"]+)"', text).group(1))
+    # the eigenvalue differs in its last digits between LAPACK builds; 1e-9 is far below any
+    # change of the model (a 1 % stiffness change moves f1 by ~0.5 %)
+    assert math.isclose(written, 20.0 / f1, rel_tol=1e-9)
     assert 1.0 < f1 < 1.5  # Muñoz et al.: 1.277 Hz
 
 
 def test_robustness_variants_change_the_filter_or_the_vehicle_as_the_paper_says(fmu_dir):
-    from fmus.ssp import read_system
+    from railfmu.fmus.ssp import read_system
 
     def system(v):
         return read_system(EXP, variant=v, fmu_dirs=[fmu_dir])
@@ -93,7 +98,7 @@ def test_ssd_settings_are_the_tuned_ones(fmu_dir):
     """The filter's q_xi / sigma_virtual and the smoother's equivalent SM in the SSD are the
     ones tune.py wrote (fitted on the training track, seed 1), and the study scores another
     track."""
-    from fmus.ssp import read_system
+    from railfmu.fmus.ssp import read_system
 
     tuned = json.loads((EXP / "tuned.json").read_text())
     system = read_system(EXP, variant="standard", fmu_dirs=[fmu_dir])
@@ -110,7 +115,7 @@ def test_ssd_settings_are_the_tuned_ones(fmu_dir):
 def test_study_table_sets_the_papers_row_under_ours():
     """table_md: per condition the filter and smoother rows, then Muñoz et al.'s Tables 2-4 row
     (none for a condition the paper does not print)."""
-    from experiments.lateral_alignment import STUDY
+    from railfmu.experiments.lateral_alignment import STUDY
 
     band = dict.fromkeys(BANDS, 0.1)
     m = {"J_mm": band, "J_rel": band, "J_mm_smoothed": band, "J_rel_smoothed": band, "estimator_seconds": 0.5}
@@ -123,7 +128,7 @@ def test_study_table_sets_the_papers_row_under_ours():
 
 @pytest.mark.slow
 def test_full_study(tmp_path):
-    res = subprocess.run([sys.executable, "-m", "experiments.cli", "study", "lateral_alignment", "--master",
+    res = subprocess.run([sys.executable, "-m", "railfmu.experiments.engine.cli", "study", "lateral_alignment", "--master",
                           "container", "--out", str(tmp_path)], capture_output=True, text=True)
     assert res.returncode == 0, res.stderr
     t = json.loads((tmp_path / "table.json").read_text())

@@ -11,7 +11,7 @@ How libcosim's fixed-step algorithm (libcosim 0.11, ``fixed_step_algorithm.cpp``
    next step.
 
 So it is a Jacobi scheme: the input used over [t_k, t_k+1] is the source's output at t_k,
-the same as our Jacobi master (:mod:`fmus.cosim.masters`). Time is an integer number of nanoseconds; an
+the same as our Jacobi master (:mod:`railfmu.fmus.cosim.masters`). Time is an integer number of nanoseconds; an
 FMU sees ``t_k = k * h_ns / 1e9`` and the step ``t_k+1 - t_k`` (both as doubles), which
 differ from FMPy's ``k * h`` and ``h`` by an ulp now and then.
 
@@ -35,7 +35,7 @@ What the test establishes:
   after the step, when the wheelset extrapolates the input it was given over the step
   (first-order hold, xi + xi_rate h); our master reads after the transfer, and the runtime
   recomputes direct-feedthrough outputs when an input is set. The test aligns libcosim's
-  ddy for this with the model's own D (from ``models.wheelset``: the model is linear, so the
+  ddy for this with the model's own D (from ``railfmu.models.vehicle.wheelset``: the model is linear, so the
   correction is exact) and the inputs each run recorded; aligned, ddy agrees to ~3e-15 of
   its range, like the states. At t = 0 both read the initial outputs, which the FMUs compute
   in Initialization Mode, so libcosim's initial transfer carries alignment_1(0) into xi.
@@ -62,10 +62,10 @@ from libcosimpy.CosimLogging import CosimLogLevel, log_output_level  # noqa: E40
 from libcosimpy.CosimObserver import CosimObserver  # noqa: E402
 from libcosimpy.CosimSlave import CosimLocalSlave  # noqa: E402
 
-from fmus.cosim.masters import run as run_master  # noqa: E402
-from fmus.cosim.system import Component, Connection, System  # noqa: E402
-from fmus.cosim.slave import Slave  # noqa: E402
-from models.wheelset import WHEELSET  # noqa: E402
+from railfmu.fmus.cosim.masters import run as run_master  # noqa: E402
+from railfmu.fmus.cosim.system import Component, Connection, System  # noqa: E402
+from railfmu.fmus.cosim.slave import Slave  # noqa: E402
+from railfmu.models.vehicle.wheelset import WHEELSET  # noqa: E402
 
 STEP_NS = 1_000_000  # 1 ms
 N_STEPS = 2000  # 2 s
@@ -244,7 +244,7 @@ EXCHANGE_RTOL = {"trolley_survey/paper_montecarlo": 2e-11}
 
 
 def _exchange_cases():
-    from experiments.runner import experiment_names, find_experiment
+    from railfmu.experiments.engine.runner import experiment_names, find_experiment
 
     return [(name, v) for name in experiment_names() for v in find_experiment(name).variants]
 
@@ -258,11 +258,11 @@ def test_exported_ssp_runs_in_libcosim_like_our_jacobi_master(tmp_path, experime
     import subprocess
     import sys
 
-    from fmus.ssp import read_system
+    from railfmu.fmus.ssp import read_system
 
     ssp = tmp_path / f"{experiment}_{variant}.ssp"
     stop = EXCHANGE_STOP.get(f"{experiment}/{variant}", EXCHANGE_STOP.get(experiment, 2.0))
-    res = subprocess.run([sys.executable, "-m", "experiments.cli", "export", experiment, "--variant", variant,
+    res = subprocess.run([sys.executable, "-m", "railfmu.experiments.engine.cli", "export", experiment, "--variant", variant,
                           "--stop-time", f"{stop:g}", "-o", str(ssp)], capture_output=True, text=True)
     assert res.returncode == 0, res.stderr
     system = read_system(ssp)  # the archive alone: its FMUs are inside
@@ -317,8 +317,8 @@ def _outputs(fmu) -> list[str]:
 
 def test_sensor_noise_in_libcosim_equals_the_python_twin(fmu_dir):
     """SensorNoise alone (inputs at 0): libcosim's samples are the counter-based noise of
-    models.sensors bit for bit, whatever importer steps it."""
-    from models.sensors import noise
+    railfmu.models.sources.sensors bit for bit, whatever importer steps it."""
+    from railfmu.models.sources.sensors import noise
 
     params = {"seed": 11, "sigma_1": 0.01, "sigma_2": 5e-4, "sample_period": 1e-3}
     run = LibcosimRun()

@@ -1,4 +1,4 @@
-"""The three masters of fmus.cosim.masters on track -> wheelset (2 s at 1 ms).
+"""The three masters of railfmu.fmus.cosim.masters on track -> wheelset (2 s at 1 ms).
 
 What is asserted (and measured when this was written):
 
@@ -35,10 +35,10 @@ import numpy as np
 import pytest
 from fmpy import read_model_description
 
-from fmus.errors import UserError
-from fmus.cosim.masters import MASTERS, gauss_seidel_order, run
-from fmus.cosim.recorder import ArrayRecorder, CsvRecorder
-from fmus.cosim.system import Component, Connection, System
+from railfmu.models.errors import UserError
+from railfmu.fmus.cosim.masters import MASTERS, gauss_seidel_order, run
+from railfmu.experiments.engine.recorder import ArrayRecorder, CsvRecorder
+from railfmu.fmus.cosim.system import Component, Connection, System
 
 TRACK = {"psd_level": 1, "seed": 3, "harmonic_lateral_amplitude": 1e-3, "harmonic_wavelength": 15.66}
 STEP = {"psd_level": 0, "step_lateral": 1e-3, "step_position": 2.0}  # 1 mm at t = 0.1 s (20 m/s)
@@ -89,7 +89,7 @@ def test_monte_carlo_members_share_one_cached_container(tmp_path, monkeypatch):
     # lateral_alignment (Muñoz et al.) with two seeds: TrackIrregularity.seed and
     # SensorNoise.seed change, and Real, Integer and Boolean parameters are bound. The cache
     # holds one folder, without the runs' values; each container run equals its Jacobi run.
-    from experiments.runner import find_experiment, load_system
+    from railfmu.experiments.engine.runner import find_experiment, load_system
 
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
     exp = find_experiment("lateral_alignment")
@@ -121,7 +121,7 @@ def test_exported_container_runs_alone_with_the_values(fmu_dir, tmp_path):
     # sets no parameter, runs it to the Jacobi master's samples bit for bit
     from fmpy import simulate_fmu
 
-    from fmus.cosim.container import build_container
+    from railfmu.fmus.cosim.container import build_container
 
     record = ["track.alignment_1", "wheelset.y", "wheelset.ddy"]
     system = track_wheelset(fmu_dir, track={**TRACK, "seed": 21}, stop_time=0.5, record=record)

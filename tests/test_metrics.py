@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from estimators.metrics import BANDS, alignment_errors, bandpass, rms
+from railfmu.estimators.track.metrics import BANDS, alignment_errors, bandpass, rms
 
 V, DT = 20.0, 1e-3  # a sample every 0.02 m
 S = V * DT * np.arange(20000)  # 400 m, the run of Muñoz et al.

@@ -4,7 +4,7 @@ step equals offline, CSV equals arrays, missing channels are left out and counte
 import numpy as np
 import pytest
 
-from estimators.alignment import AlignmentKalmanFilter
+from railfmu.estimators.track.alignment import AlignmentKalmanFilter
 from helpers import track_wheelset_signals
 
 DT = 1e-3

@@ -9,13 +9,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from estimators.observer import Observer, OfflineObserver
-from experiments.observers import ObserverBank
-from fmus.cosim.masters import run
-from fmus.cosim.recorder import ArrayRecorder
-from fmus.errors import UserError
-from fmus.ssp import read_system
-from fmus.ssp.xmltools import RF_NS as RF  # our annotation namespace
+from railfmu.estimators.core.observer import Observer, OfflineObserver
+from railfmu.experiments.engine.observer_bank import ObserverBank
+from railfmu.fmus.cosim.masters import run
+from railfmu.experiments.engine.recorder import ArrayRecorder
+from railfmu.models.errors import UserError
+from railfmu.fmus.ssp import read_system
+from railfmu.fmus.ssp.xmltools import RF_NS as RF  # our annotation namespace
 
 
 class Echo(Observer):
@@ -306,7 +306,7 @@ def test_unit_mismatch_is_one_line_naming_observer_channel_and_units(fmu_dir, tm
 def test_export_keeps_the_observer_declarations(fmu_dir, tmp_path):
     """samplePeriod, sampling, offline, valid flags and the units given on SSD connectors survive
     `railfmu export` (the .ssp is schema-valid and reads back to the same specs)."""
-    from fmus.ssp import validate_ssp, write_ssp
+    from railfmu.fmus.ssp import validate_ssp, write_ssp
 
     obs = (observer(attrs='samplePeriod="0.005" sampling="event"', valid='valid="flag.y"')
            + observer(name="mean", cls="RecordMean", v="", attrs='offline="true"', truth=""))

@@ -14,10 +14,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from fmus.cosim.masters import run
-from fmus.cosim.slave import FMUError, Slave
-from fmus.cosim.system import Component
-from models.train_longitudinal import GAMMA, LOAD_MASS, R0, R1, R2, TARE_MASS, Train
+from railfmu.fmus.cosim.masters import run
+from railfmu.fmus.cosim.slave import FMUError, Slave
+from railfmu.fmus.cosim.system import Component
+from railfmu.models.train.longitudinal import GAMMA, LOAD_MASS, R0, R1, R2, TARE_MASS, Train
 
 DATA = Path(__file__).parent / "data"
 M_EFF = GAMMA * (TARE_MASS + LOAD_MASS)
@@ -135,8 +135,8 @@ PROCESS = dict(known=("effort_set",), fixed={"set_state": True, "use_effort_set"
 
 def twin_process(line=None):
     """The process model with the FMU's Python twin, one ``Train`` per sigma point: the FMU's
-    arithmetic, operation for operation (independent of estimators.running_resistance)."""
-    from models.line_profile import DEFAULT_LINE, LineProfile
+    arithmetic, operation for operation (independent of railfmu.estimators.train.running_resistance)."""
+    from railfmu.models.track.line_profile import DEFAULT_LINE, LineProfile
 
     ln = line if isinstance(line, LineProfile) else LineProfile.read(line or DEFAULT_LINE)
 
@@ -164,7 +164,7 @@ def test_each_sigma_point_is_one_fmu_step_bit_for_bit(fmu_dir):
     """Consecutive filter steps (the instance follows the filter's clock), a second call at
     the same time (from the snapshot), a restarted filter (back to t = 0: the instance is
     reset), efforts of both signs: every row equals the twin started from it."""
-    from fmus.cosim.process_model import FmuProcessModel
+    from railfmu.fmus.cosim.process_model import FmuProcessModel
 
     pm = FmuProcessModel(fmu_dir / "TrainLongitudinal.fmu", TRAIN_COLUMNS, **PROCESS)
     twin = twin_process()
@@ -186,7 +186,7 @@ def test_each_sigma_point_is_one_fmu_step_bit_for_bit(fmu_dir):
 def test_the_component_parameters_are_the_instances(fmu_dir, tmp_path):
     """A 10 per mille uphill line and a heavier train given as parameters: the FMU process
     model uses them (the twin with the same line and mass agrees; the default line does not)."""
-    from fmus.cosim.process_model import FmuProcessModel
+    from railfmu.fmus.cosim.process_model import FmuProcessModel
 
     line = tmp_path / "uphill.csv"
     line.write_text("position_m,gradient_permille,speed_limit_kmh\n0,10,200\n100000,10,200\n")
@@ -205,7 +205,7 @@ def test_the_component_parameters_are_the_instances(fmu_dir, tmp_path):
 def test_an_fmu_that_cannot_save_its_state_is_refused_in_one_line(fmu_dir, tmp_path):
     import zipfile
 
-    from fmus.cosim.process_model import FmuProcessModel, ProcessModelError
+    from railfmu.fmus.cosim.process_model import FmuProcessModel, ProcessModelError
 
     src, dst = fmu_dir / "TrainLongitudinal.fmu", tmp_path / "TrainLongitudinal.fmu"
     with zipfile.ZipFile(src) as zin, zipfile.ZipFile(dst, "w") as zout:
@@ -236,7 +236,7 @@ def gnss_fixes(fmu_dir):
 
 
 def ukf_fmu(fmu_dir, parameters=None):
-    from experiments.fmu_process import FmuPaperUKF, process_model
+    from railfmu.experiments.engine.fmu_process import FmuPaperUKF, process_model
 
     train = Component("train", fmu_dir / "TrainLongitudinal.fmu", dict(parameters or {}))
     return FmuPaperUKF(10.0, process=process_model(FmuPaperUKF, train, "Observer 'ukf_fmu'", "ukf_fmu"))
@@ -246,7 +246,7 @@ def test_ukf_fmu_equals_the_ukf_on_the_fmus_twin_bit_for_bit(fmu_dir, gnss_fixes
     """PaperUKF with the twin as its process (the FMU's arithmetic in Python) gives the same
     estimates and covariance as with the FMU, bit for bit: the FMU process model adds nothing
     (first 12 fixes: the start from rest and the traction phase)."""
-    from estimators.running_resistance import PaperUKF
+    from railfmu.estimators.train.running_resistance import PaperUKF
 
     t, z, _, _ = gnss_fixes
     f, ref = ukf_fmu(fmu_dir), PaperUKF(10.0, process=twin_process())
@@ -262,7 +262,7 @@ def test_ukf_fmu_equals_the_python_ode_process_bit_for_bit(fmu_dir, gnss_fixes):
     FMU-process UKF equals it bit for bit, estimates and covariance (before the sums were
     ordered alike the sigma-point weights, 1.7e5, amplified the ulp differences to 1.4e-3
     sigma over the run)."""
-    from estimators.running_resistance import PaperUKF
+    from railfmu.estimators.train.running_resistance import PaperUKF
 
     t, z, _, _ = gnss_fixes
     f, ode = ukf_fmu(fmu_dir), PaperUKF(10.0, process="ode")
@@ -280,7 +280,7 @@ def test_ukf_fmu_against_the_papers_discrete_process(fmu_dir, gnss_fixes):
     dwell at the platform). Under eq. 1 the held effort does not reproduce the measured speed
     change (r(v) grows as the train accelerates), and the filter, sure of its state (Q = 0),
     does not correct it."""
-    from estimators.running_resistance import PaperUKF
+    from railfmu.estimators.train.running_resistance import PaperUKF
 
     t, z, s_true, v_true = gnss_fixes
     f, disc = ukf_fmu(fmu_dir), PaperUKF(10.0)
@@ -299,8 +299,8 @@ def test_ukf_fmu_with_the_effort_its_process_needs_tracks_as_eq_4(fmu_dir, gnss_
     """effort="process": the effort whose FMU prediction of the centre point reproduces the
     measured speed change. Measured on seed 1: speed rms 0.28-0.29 km/h, position rms 3.8-4.9
     m, as eq. 4, final r0-r2 within 2e-6 of eq. 4's; three FMU process calls per fix."""
-    from estimators.running_resistance import PaperUKF
-    from experiments.fmu_process import FmuPaperUKF, process_model
+    from railfmu.estimators.train.running_resistance import PaperUKF
+    from railfmu.experiments.engine.fmu_process import FmuPaperUKF, process_model
 
     t, z, s_true, v_true = gnss_fixes
     train = Component("train", fmu_dir / "TrainLongitudinal.fmu", {})
@@ -317,7 +317,7 @@ def test_ukf_fmu_with_the_effort_its_process_needs_tracks_as_eq_4(fmu_dir, gnss_
 
 def ssd(observers: str, line: Path, stop: float = 200.0) -> str:
     """TrainLongitudinal + Driver + GnssReceiver on ``line`` (both read it), 1 s steps."""
-    from fmus.ssp.xmltools import RF_NS
+    from railfmu.fmus.ssp.xmltools import RF_NS
 
     def line_binding(name):
         return (f'<ssd:ParameterBindings><ssd:ParameterBinding><ssd:ParameterValues><ssv:ParameterSet '
@@ -357,7 +357,7 @@ def ssd(observers: str, line: Path, stop: float = 200.0) -> str:
 """
 
 
-def ukf_observer(name="ukf_fmu", cls="experiments.fmu_process.FmuPaperUKF", component="train") -> str:
+def ukf_observer(name="ukf_fmu", cls="railfmu.experiments.engine.fmu_process.FmuPaperUKF", component="train") -> str:
     setting = f'<rf:Setting name="process_component" value="{component}"/>' if component else ""
     return (f'<rf:Observer name="{name}" class="{cls}" sampling="event" samplePeriod="10">'
             '<rf:Measurement name="position" connector="gnss.position" valid="gnss.valid"/>'
@@ -378,10 +378,10 @@ def test_ukf_fmu_in_an_ssd_takes_the_components_fmu_and_parameters(fmu_dir, tmp_
     """Declared in the SSD with process_component="train": the bank builds the process model
     from the train component (its hilly line file), and the estimates equal PaperUKF on the
     twin with that line, bit for bit; the instance is freed when the run closes."""
-    from estimators.running_resistance import PaperUKF
-    from experiments.observers import ObserverBank
-    from fmus.cosim.recorder import ArrayRecorder
-    from fmus.ssp import read_system
+    from railfmu.estimators.train.running_resistance import PaperUKF
+    from railfmu.experiments.engine.observer_bank import ObserverBank
+    from railfmu.experiments.engine.recorder import ArrayRecorder
+    from railfmu.fmus.ssp import read_system
 
     (tmp_path / "exp").mkdir()
     (tmp_path / "exp" / "SystemStructure.ssd").write_text(ssd(ukf_observer(), hilly_line))
@@ -404,13 +404,13 @@ def test_ukf_fmu_in_an_ssd_takes_the_components_fmu_and_parameters(fmu_dir, tmp_
     (ukf_observer(component="track"), "Observer 'ukf_fmu': process_component 'track' is not a component"),
     (ukf_observer(component="gnss"), "Observer 'ukf_fmu': process_component 'gnss': GnssReceiver.fmu (ukf_fmu process model) as a "
                                       "process model: no variable 's_set'"),
-    (ukf_observer(cls="estimators.running_resistance.PaperUKF"), "PaperUKF takes no FMU process model"),
+    (ukf_observer(cls="railfmu.estimators.train.running_resistance.PaperUKF"), "PaperUKF takes no FMU process model"),
     (ukf_observer(component=""), "ukf_fmu': bad settings: needs the setting process_component"),
 ])
 def test_a_bad_process_component_is_one_line(fmu_dir, tmp_path, hilly_line, observer, message):
-    from experiments.observers import ObserverBank
-    from fmus.errors import UserError
-    from fmus.ssp import read_system
+    from railfmu.experiments.engine.observer_bank import ObserverBank
+    from railfmu.models.errors import UserError
+    from railfmu.fmus.ssp import read_system
 
     (tmp_path / "exp").mkdir()
     (tmp_path / "exp" / "SystemStructure.ssd").write_text(ssd(observer, hilly_line))
@@ -423,7 +423,7 @@ def test_a_bad_process_component_is_one_line(fmu_dir, tmp_path, hilly_line, obse
 def test_a_failing_sigma_point_names_itself_and_the_next_call_recovers(fmu_dir):
     """v = 1e200 m/s overflows r2 v^2: the FMU's own message, the sigma point and the step are
     in one line; the next call at the same time restores the snapshot and is exact again."""
-    from fmus.cosim.process_model import FmuProcessModel
+    from railfmu.fmus.cosim.process_model import FmuProcessModel
 
     pm = FmuProcessModel(fmu_dir / "TrainLongitudinal.fmu", TRAIN_COLUMNS, **PROCESS)
     X = sigma_like_points()[:3]

@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 from scipy.linalg import expm, solve_continuous_lyapunov
 
-from estimators.discretize import van_loan
-from estimators.rail_play import RailPlay
+from railfmu.estimators.core.discretize import van_loan
+from railfmu.estimators.inertial.rail_play import RailPlay
 
 PLAYS = [  # sigma_lateral, sigma_vertical (m), wavelength (m), damping
     (7.07e-4, 3.54e-4, 2.0, 1 / math.sqrt(2)),
@@ -39,7 +39,7 @@ def test_stationary_covariance_solves_the_lyapunov_equation(play):
 @pytest.mark.parametrize("play", PLAYS, ids=["butterworth", "light", "critical", "overdamped"])
 def test_discretisation_is_van_loans(play):
     """Phi and Q_d over distances from creeping to ten wavelengths equal scipy's expm(F ds) and
-    estimators.discretize.van_loan of (F, G q G^T) to 1e-10 (Phi, absolute; Q_d, of the
+    railfmu.estimators.core.discretize.van_loan of (F, G q G^T) to 1e-10 (Phi, absolute; Q_d, of the
     stationary covariance's scale). Van Loan's exponential grows as exp(2 zeta k ds) and loses
     the digits beyond a wavelength, so it is taken over ds / 2^m <= 0.05 m and doubled m times
     (Phi <- Phi Phi, Q <- Phi Q Phi^T + Q)."""

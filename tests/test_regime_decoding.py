@@ -12,10 +12,24 @@ import fmpy
 import numpy as np
 import pytest
 
-from estimators.driving_regimes import (BRAKING, COASTING, CRUISING, RECOGNISERS, STANDSTILL, TRACTION,
-                                        interval_regimes, recognise, recogniser, regime_accuracy)
-from estimators.regime_decoding import (emission_scores, mixed_intervals, recognise_hmm, switch_log_odds,
-                                        viterbi)
+from railfmu.estimators.train.driving_regimes import (
+    BRAKING,
+    COASTING,
+    CRUISING,
+    STANDSTILL,
+    TRACTION,
+    interval_regimes,
+    recognise,
+    regime_accuracy,
+)
+from railfmu.estimators.train.recognisers import RECOGNISERS, recogniser
+from railfmu.estimators.train.regime_decoding import (
+    emission_scores,
+    mixed_intervals,
+    recognise_hmm,
+    switch_log_odds,
+    viterbi,
+)
 
 
 def brute_force(E, T):
@@ -119,9 +133,9 @@ needs_gcc = pytest.mark.skipif(shutil.which("gcc") is None or fmpy.platform != "
 
 @needs_gcc
 def test_each_observer_names_its_recogniser(fmu_dir):
-    from experiments.runner import find_experiment, load_system
-    from experiments.train_resistance import regime_recognisers
-    from fmus.errors import UserError
+    from railfmu.experiments.engine.runner import find_experiment, load_system
+    from railfmu.experiments.train_resistance import regime_recognisers
+    from railfmu.models.errors import UserError
 
     exp = find_experiment("train_resistance")
     system = load_system(exp, "standard")
@@ -140,10 +154,10 @@ def test_accuracy_on_fmu_runs(fmu_dir):
     study's 1-67): `improved` read by the HMM 0.969, 0.961, 0.945 against the paper's rules on
     the paper's UKF 0.937, 0.859, 0.820; asserted >= 0.94 each and 0.05 above on average. The
     study's metric is the recogniser's on the estimator's outputs (the same numbers here)."""
-    from estimators.driving_regimes import true_regimes
-    from experiments.runner import run_experiment
-    from experiments.study_protocol import RunData
-    from experiments.train_resistance import STUDY
+    from railfmu.estimators.train.driving_regimes import true_regimes
+    from railfmu.experiments.engine.runner import run_experiment
+    from railfmu.experiments.engine.study_protocol import RunData
+    from railfmu.experiments.train_resistance import STUDY
 
     ours, paper = [], []
     captured = {}

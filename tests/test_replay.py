@@ -19,13 +19,13 @@ import fmpy
 import numpy as np
 import pytest
 
-from estimators.alignment import AlignmentKalmanFilter
-from experiments.alignment_replay.record import COLUMNS, TABLE, table_from_signals
-from experiments.observers import ObserverBank
-from experiments.runner import run_experiment
-from fmus.cosim.masters import run as run_master
-from fmus.errors import UserError
-from fmus.ssp import read_system, write_ssp
+from railfmu.estimators.track.alignment import AlignmentKalmanFilter
+from railfmu.experiments.alignment_replay.record import COLUMNS, TABLE, table_from_signals
+from railfmu.experiments.engine.observer_bank import ObserverBank
+from railfmu.experiments.engine.runner import run_experiment
+from railfmu.fmus.cosim.masters import run as run_master
+from railfmu.models.errors import UserError
+from railfmu.fmus.ssp import read_system, write_ssp
 
 pytestmark = pytest.mark.skipif(shutil.which("gcc") is None or fmpy.platform != "linux64",
                                 reason="needs gcc on linux64")
@@ -35,7 +35,7 @@ CHANNELS = {"replay.y_1": "ddy", "replay.y_2": "dpsi", "replay.y_3": "ddy_f", "r
 
 
 def railfmu(*args, cwd=None):
-    return subprocess.run([sys.executable, "-m", "experiments.cli", *args], capture_output=True,
+    return subprocess.run([sys.executable, "-m", "railfmu.experiments.engine.cli", *args], capture_output=True,
                           text=True, cwd=cwd)
 
 

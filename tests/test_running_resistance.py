@@ -11,12 +11,28 @@ import numpy as np
 import pytest
 from filterpy.kalman import MerweScaledSigmaPoints, UnscentedKalmanFilter
 
-from estimators.running_resistance import (PAPER_SIGMAS, ImprovedEstimator, LineTerm, PaperUKF,
-                                           coasting_information, discrete_process, ode_process)
-from fmus.cosim.masters import run
-from fmus.cosim.system import Component, Connection, System
-from models.line_profile import G0, LineProfile
-from models.train_longitudinal import GAMMA, LOAD_MASS, PASSENGER_MASS, R0, R1, R2, SEATS, TARE_MASS
+from railfmu.estimators.train.running_resistance import (
+    PAPER_SIGMAS,
+    ImprovedEstimator,
+    LineTerm,
+    PaperUKF,
+    coasting_information,
+    discrete_process,
+    ode_process,
+)
+from railfmu.fmus.cosim.masters import run
+from railfmu.fmus.cosim.system import Component, Connection, System
+from railfmu.models.track.line_profile import G0, LineProfile
+from railfmu.models.train.longitudinal import (
+    GAMMA,
+    LOAD_MASS,
+    PASSENGER_MASS,
+    R0,
+    R1,
+    R2,
+    SEATS,
+    TARE_MASS,
+)
 from test_driver import train_system
 
 SIGMA_NAMES = ("sigma_s0", "sigma_v0", "sigma_r0_0", "sigma_r1_0", "sigma_r2_0")

@@ -2,7 +2,7 @@
 statistics of the counter-based noise, its independence from how an importer steps, and the
 FMU's hand-written C equal to the Python twin bit for bit.
 
-Measured when written: the FMU equals :func:`models.sensors.noise` exactly (tolerance 0) on
+Measured when written: the FMU equals :func:`railfmu.models.sources.sensors.noise` exactly (tolerance 0) on
 10000 samples of all eight channels; numpy's own log differs from libm's in the last bit for
 ~0.4 % of arguments, which is why the twin calls ``math.log``/``math.cos``.
 """
@@ -16,11 +16,11 @@ import pytest
 from fmpy import simulate_fmu
 from scipy import stats
 
-from fmus.cosim.masters import run
-from fmus.cosim.slave import FMUError, Slave
-from fmus.ssp import read_system
-from fmus.cosim.system import Component, Connection, System
-from models.sensors import (
+from railfmu.fmus.cosim.masters import run
+from railfmu.fmus.cosim.slave import FMUError, Slave
+from railfmu.fmus.ssp import read_system
+from railfmu.fmus.cosim.system import Component, Connection, System
+from railfmu.models.sources.sensors import (
     GAMMA,
     N_CHANNELS,
     MUNOZ_SENSORS,
@@ -32,7 +32,7 @@ from models.sensors import (
     sample_index,
     uniforms,
 )
-from models.track import SplitMix64
+from railfmu.models.track.irregularity import SplitMix64
 
 CH = range(1, N_CHANNELS + 1)
 U = [f"u_{i}" for i in CH]
@@ -73,7 +73,7 @@ def _noise_run(fmu, params, stop=20.0, step=1e-3):
 
 def test_noise_is_splitmix64_streams_and_box_muller():
     """c_i is output i of SplitMix64(seed); sample k reads outputs 2k+1, 2k+2 of SplitMix64(c_i)
-    (models.track.SplitMix64, itself tested against Vigna's reference), then Box-Muller."""
+    (railfmu.models.track.irregularity.SplitMix64, itself tested against Vigna's reference), then Box-Muller."""
     for seed in (0, 1, 12345, -5):
         r = SplitMix64(seed)
         for i in CH:

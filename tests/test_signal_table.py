@@ -16,9 +16,9 @@ from fmpy import extract, read_model_description
 from fmpy.fmi1 import FMICallException
 from fmpy.fmi2 import FMU2Slave, fmi2LastSuccessfulTime, fmi2Terminated
 
-from fmus.cosim.slave import FMUError, Slave
-from fmus.generate.build import validate
-from models.signal_table import EXAMPLE, N_BOOLEAN, N_INTEGER, N_REAL, Table
+from railfmu.fmus.cosim.slave import FMUError, Slave
+from railfmu.fmus.generate.build import validate
+from railfmu.models.sources.signal_table import EXAMPLE, N_BOOLEAN, N_INTEGER, N_REAL, Table
 
 pytestmark = pytest.mark.skipif(shutil.which("gcc") is None or fmpy.platform != "linux64",
                                 reason="needs gcc on linux64")
@@ -244,7 +244,7 @@ def test_bad_csv_in_an_ssd_run_is_one_line_and_exit_2(fmu, tmp_path):
     ssd = tmp_path / "replay" / "SystemStructure.ssd"
     ssd.parent.mkdir()
     ssd.write_text(SSD.format(file=bad))
-    res = subprocess.run([sys.executable, "-m", "experiments.cli", "run", str(ssd.parent),
+    res = subprocess.run([sys.executable, "-m", "railfmu.experiments.engine.cli", "run", str(ssd.parent),
                           "--out", str(tmp_path / "out")], capture_output=True, text=True)
     assert res.returncode == 2, res.stdout + res.stderr
     assert "Traceback" not in res.stderr
@@ -255,7 +255,7 @@ def test_bad_csv_in_an_ssd_run_is_one_line_and_exit_2(fmu, tmp_path):
         "line 4: 5 fields, but the header has 4 columns"), errors[0]
     # the same SSD with a good file runs
     ssd.write_text(SSD.format(file=good).replace('"x"', '"gnss_x"'))
-    res = subprocess.run([sys.executable, "-m", "experiments.cli", "run", str(ssd.parent),
+    res = subprocess.run([sys.executable, "-m", "railfmu.experiments.engine.cli", "run", str(ssd.parent),
                           "--out", str(tmp_path / "out2")], capture_output=True, text=True)
     assert res.returncode == 0, res.stderr
     rows = (tmp_path / "out2" / "signals.csv").read_text().splitlines()

@@ -18,10 +18,10 @@ import math
 import numpy as np
 import pytest
 
-from fmus.cosim.masters import MASTERS, run
-from fmus.cosim.recorder import ArrayRecorder, CsvRecorder
-from fmus.cosim.system import Component, Connection, System, check_system
-from fmus.errors import UserError
+from railfmu.fmus.cosim.masters import MASTERS, run
+from railfmu.experiments.engine.recorder import ArrayRecorder, CsvRecorder
+from railfmu.fmus.cosim.system import Component, Connection, System, check_system
+from railfmu.models.errors import UserError
 
 from stair_fmu import build_stair
 
@@ -138,7 +138,7 @@ SSD = """<?xml version="1.0" encoding="UTF-8"?>
 
 @pytest.mark.parametrize("master", MASTERS)
 def test_integer_and_boolean_inputs_set_from_ssv_and_set(stair, tmp_path, master):
-    from fmus.ssp import read_system
+    from railfmu.fmus.ssp import read_system
 
     build_stair(tmp_path)
     (tmp_path / "SystemStructure.ssd").write_text(SSD)
@@ -164,7 +164,7 @@ def test_stair_is_a_valid_fmu(stair):
 
 def test_container_without_c_compiler_gives_the_same_rows(stair, monkeypatch):
     """The ctypes loop that replaces the C driver: same Integer/Boolean rows, same early end."""
-    import fmus.cosim.container as container
+    import railfmu.fmus.cosim.container as container
 
     system = pair(stair)
     jac = run(system, "jacobi", progress=False)

@@ -14,9 +14,9 @@ from pathlib import Path
 
 import pytest
 
-from fmus.errors import UserError
-from fmus.ssp import list_variants, read_system, validate_ssp, write_ssp
-from fmus.ssp.units import OURS, UnitError, Units, conversion, from_ssc
+from railfmu.models.errors import UserError
+from railfmu.fmus.ssp import list_variants, read_system, validate_ssp, write_ssp
+from railfmu.fmus.ssp.units import OURS, UnitError, Units, conversion, from_ssc
 
 EXP = Path(__file__).resolve().parents[1] / "experiments" / "track_wheelset"
 
@@ -123,7 +123,7 @@ def test_example_experiment(fmu_dir):
     assert wheelset.parameters == {"V": 20.0}
     assert len(s.record) == 11
     (obs,) = s.observers
-    assert obs.cls == "estimators.alignment.AlignmentKalmanFilter"
+    assert obs.cls == "railfmu.estimators.track.alignment.AlignmentKalmanFilter"
     assert list(obs.measurements) == ["ddy", "dpsi", "ddy_f"] and obs.truth == {"xi": "track.alignment_1"}
     assert obs.settings == {"V": 20}
     assert s.warnings == [] and s.source == EXP
@@ -299,7 +299,7 @@ def test_recorder_and_observers(fmu_dir, tmp_path):
       <ssc:Annotation type="org.railfmu.recorder"><rf:Recorder><rf:Record connector="track.position"/>
       </rf:Recorder></ssc:Annotation>
       <ssc:Annotation type="org.railfmu.observers"><rf:Observers>
-        <rf:Observer name="o" class="estimators.x.Y"><rf:Input name="a" connector="wheelset.ddy"/>
+        <rf:Observer name="o" class="railfmu.estimators.x.Y"><rf:Input name="a" connector="wheelset.ddy"/>
           <rf:Truth name="xi" connector="track.alignment_1"/><rf:Setting name="on" value="true"/>
           <rf:Setting name="q" value="1e-3"/><rf:Setting name="label" value="left"/></rf:Observer>
       </rf:Observers></ssc:Annotation></ssd:Annotations>"""
@@ -492,7 +492,7 @@ def test_written_ssd_for_omsimulator(fmu_dir, tmp_path):
     valid against the SSP 1.0 schema, ours stay after it."""
     from lxml import etree
 
-    from fmus.ssp.xmltools import schema_problems
+    from railfmu.fmus.ssp.xmltools import schema_problems
 
     s = read_system(EXP, variant="harmonic", fmu_dirs=[fmu_dir], step_size=5e-4)
     with zipfile.ZipFile(write_ssp(s, tmp_path / "tw.ssp")) as zf:
@@ -559,7 +559,7 @@ def test_variant_and_set_override_observer_settings(fmu_dir, tmp_path):
 # -- observer settings bound to parameters, the experiment's master and stop time -----------
 
 BOUND = """<ssd:Annotations><ssc:Annotation type="org.railfmu.observers"><rf:Observers>
-  <rf:Observer name="o" class="estimators.x.Y"><rf:Input name="a" connector="wheelset.ddy"/>
+  <rf:Observer name="o" class="railfmu.estimators.x.Y"><rf:Input name="a" connector="wheelset.ddy"/>
     <rf:Setting name="conicity" parameter="wheelset.alpha"/><rf:Setting name="mass" parameter="wheelset.m"/>
     <rf:Setting name="level" parameter="track.psd_level"/>{extra}</rf:Observer>
 </rf:Observers></ssc:Annotation></ssd:Annotations>"""

@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 from fmpy import simulate_fmu
 
-from fmus.cosim.slave import Slave
-from models.step_source import STEP_SOURCE
+from railfmu.fmus.cosim.slave import Slave
+from railfmu.models.sources.step_source import STEP_SOURCE
 
 
 def run(fmu_dir, params, stop=1.0, h=1e-2, accumulate=False):

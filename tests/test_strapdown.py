@@ -17,11 +17,25 @@ import math
 import numpy as np
 import pytest
 
-from estimators.attitude import (coarse_alignment, coarse_heading_sigma, dcm_from_rph, dcm_from_rotvec, perturb,
-                                 quat_from_rotvec, quat_increment_from_rotvec, rph_from_dcm, rph_from_quat)
-from estimators.ins_observer import INCREMENTS, StrapdownINS, initial_state_from_truth_csv, read_imu_csv
-from estimators.strapdown import NAV, Strapdown
-from models import earth
+from railfmu.estimators.inertial.attitude import (
+    coarse_alignment,
+    coarse_heading_sigma,
+    dcm_from_rph,
+    dcm_from_rotvec,
+    perturb,
+    quat_from_rotvec,
+    quat_increment_from_rotvec,
+    rph_from_dcm,
+    rph_from_quat,
+)
+from railfmu.estimators.inertial.ins_observer import (
+    INCREMENTS,
+    StrapdownINS,
+    initial_state_from_truth_csv,
+    read_imu_csv,
+)
+from railfmu.estimators.inertial.strapdown import NAV, Strapdown
+from railfmu.models import earth
 
 LAT, LON, H = math.radians(30.5), math.radians(114.3), 25.0   # Wuhan, where Jiang et al. (2017) surveyed
 DT = 0.005
@@ -457,11 +471,11 @@ def test_initial_state_from_truth_csv(tmp_path):
 def test_observer_binds_as_an_ssd_observer():
     """What an SSD's rf:Observer gives the bank: the class path, scalar settings (strings for
     ``alignment``), the six increments as known inputs; every unit is one the bank knows."""
-    from experiments.observers import make_observer
-    from fmus.cosim.system import ObserverSpec
-    from fmus.errors import UserError
-    from fmus.ssp.units import OURS
-    spec = ObserverSpec(name="ins", cls="estimators.ins_observer.StrapdownINS",
+    from railfmu.experiments.engine.observer_bank import make_observer
+    from railfmu.fmus.cosim.system import ObserverSpec
+    from railfmu.models.errors import UserError
+    from railfmu.fmus.ssp.units import OURS
+    spec = ObserverSpec(name="ins", cls="railfmu.estimators.inertial.ins_observer.StrapdownINS",
                         inputs={k: f"trolley.{k}" for k in INCREMENTS},
                         settings={**SETTINGS, "heading_error": HEADING, "alignment": "given"})
     obs, stride = make_observer(spec, DT, "trolley_survey")
@@ -604,7 +618,7 @@ class PythonStrapdown:
         self.c_lon = (t - lon) - y
         self.lon = t
         # attitude: q(k) = conj(q(zeta)) q(k-1) q(phi), as q(k-1) + (the change), compensated
-        # q(phi) - 1 and conj(q(zeta)) - 1, inlined quat_increment_from_rotvec (estimators.attitude)
+        # q(phi) - 1 and conj(q(zeta)) - 1, inlined quat_increment_from_rotvec (railfmu.estimators.inertial.attitude)
         a2 = px * px + py * py + pz * pz
         if a2 < 1e-4:
             a0 = -a2 / 8.0 + a2 * a2 / 384.0

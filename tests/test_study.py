@@ -13,16 +13,24 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from experiments.study import flatten, statistics, summarise
-from experiments.study_protocol import (STATISTICS, bind_role, measurement, observer_input, output, parameter, setting,
-                                       truth)
-from fmus.errors import UserError
+from railfmu.experiments.engine.study import flatten, statistics, summarise
+from railfmu.experiments.engine.study_protocol import (
+    STATISTICS,
+    bind_role,
+    measurement,
+    observer_input,
+    output,
+    parameter,
+    setting,
+    truth,
+)
+from railfmu.models.errors import UserError
 
 EXPERIMENTS = Path(__file__).resolve().parents[1] / "experiments"
 
 
 def railfmu(*args, cwd=None):
-    return subprocess.run([sys.executable, "-m", "experiments.cli", *args], capture_output=True, text=True, cwd=cwd)
+    return subprocess.run([sys.executable, "-m", "railfmu.experiments.engine.cli", *args], capture_output=True, text=True, cwd=cwd)
 
 
 def test_statistics_of_known_numbers():
@@ -53,8 +61,8 @@ def test_summary_over_runs_skips_the_runs_inputs_and_counts_runs_that_have_a_met
 
 
 def test_roles_are_bound_from_the_ssd(fmu_dir):
-    from experiments import lateral_alignment, suspension_fault
-    from fmus.ssp import read_system
+    from railfmu.experiments import lateral_alignment, suspension_fault
+    from railfmu.fmus.ssp import read_system
 
     system = read_system(EXPERIMENTS / "suspension_fault", variant="step_fault", fmu_dirs=[fmu_dir])
     roles = suspension_fault.STUDY.bind(system)
@@ -78,11 +86,11 @@ def test_roles_are_bound_from_the_ssd(fmu_dir):
 
 
 def test_a_member_writes_nothing_loads_no_plotting_and_derives_no_model(tmp_path):
-    code = ("import io, sys; from experiments.runner import run_experiment; "
+    code = ("import io, sys; from railfmu.experiments.engine.runner import run_experiment; "
             "m = run_experiment('track_wheelset', 'psd', 'member', seed=3, stop_time=0.2, progress=False, "
             "log=io.StringIO(), write_files=False); "
             "print(m['seed'], m['parameters']['track']['seed'], sorted(m['timing_s']), "
-            "'experiments.plots' in sys.modules, 'models.vehicle_lateral' in sys.modules)")
+            "'railfmu.experiments.engine.plots' in sys.modules, 'railfmu.models.vehicle.vehicle_lateral' in sys.modules)")
     res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=tmp_path,
                          env={"PYTHONPATH": str(EXPERIMENTS.parent), "PATH": ""})
     assert res.returncode == 0, res.stderr

@@ -25,7 +25,7 @@ import time
 import numpy as np
 import pytest
 
-from estimators.suspension import (
+from railfmu.estimators.suspension.stiffness import (
     RAIL_RATES,
     RAILS,
     SENSOR_NOISE_STD,
@@ -34,9 +34,9 @@ from estimators.suspension import (
     SuspensionWLS,
     suspension_metrics,
 )
-from fmus.cosim.masters import run
-from fmus.cosim.system import Component, Connection, System
-from models.coach_vertical import SENSORS
+from railfmu.fmus.cosim.masters import run
+from railfmu.fmus.cosim.system import Component, Connection, System
+from railfmu.models.vehicle.coach_vertical import SENSORS
 
 DT = 0.01
 FAULT_TIME = 20.0
@@ -67,7 +67,7 @@ class ObserverSink:
 
 
 def coach_signals(fmu_dir, final_value, stop_time, sinks=(), track_seed=1):
-    """Run track -> coach (with the k1 step) through fmus.cosim.masters.run; returns t (s), the
+    """Run track -> coach (with the k1 step) through railfmu.fmus.cosim.masters.run; returns t (s), the
     observer inputs Z (n, 15: SENSORS, rails m, rates m/s, noise-free) and the true k1 (N/m)."""
     conns = [Connection("fault", "y", "coach", "k1")]
     for i in (1, 2):  # outputs _1 at axle position 0 (bogie 1, leading), _2 at 19 m (bogie 2)

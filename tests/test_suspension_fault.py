@@ -17,7 +17,7 @@ KEYS = {"k1_true_final", "k1_est_final", "rel_error_final", "convergence_time_s"
 
 def run(tmp_path, variant, *extra):
     out = tmp_path / variant
-    res = subprocess.run([sys.executable, "-m", "experiments.cli", "run", "suspension_fault", "--variant", variant,
+    res = subprocess.run([sys.executable, "-m", "railfmu.experiments.engine.cli", "run", "suspension_fault", "--variant", variant,
                           "--out", str(out), *extra], capture_output=True, text=True)
     assert res.returncode == 0, res.stderr
     return json.loads((out / "metrics.json").read_text()), out
@@ -47,7 +47,7 @@ def test_reduced_run_meets_the_improved_targets(tmp_path, variant):
 
 def test_study_table_sets_the_papers_claim_beside_its_scheme():
     """table_md: the last column is headed by the paper and holds its claim on the paper_wls rows only."""
-    from experiments.suspension_fault import PAPER_CLAIM, STUDY
+    from railfmu.experiments.suspension_fault import PAPER_CLAIM, STUDY
 
     e = {"k1_true_final": 430e3, "k1_est_final": 425e3, "rel_error_final": -0.0116, "convergence_time_s": 9.0}
     md = STUDY.table_md({"static": {"paper_wls": e, "improved": e}})
@@ -73,7 +73,7 @@ def test_noise_comes_from_the_sensors_fmu(tmp_path):
 
 @pytest.mark.slow
 def test_full_study_meets_every_target(tmp_path):
-    res = subprocess.run([sys.executable, "-m", "experiments.cli", "study", "suspension_fault", "--out",
+    res = subprocess.run([sys.executable, "-m", "railfmu.experiments.engine.cli", "study", "suspension_fault", "--out",
                           str(tmp_path)], capture_output=True, text=True)
     assert res.returncode == 0, res.stderr
     table = json.loads((tmp_path / "table.json").read_text())

@@ -3,7 +3,7 @@
 FMI does not say how a master computes its communication points. FMPy's ``simulate_fmu`` and
 our masters use ``start + k h``; OMSimulator adds ``h`` to its time every step. Over 1e6 steps
 the two differ by up to 2.2e-5 h (1e7 steps: 1.8e-3 h), which is why a sample or switching
-instant counts as reached within ``STEP_TOLERANCE`` = 1 % of the step (models.base, model.h).
+instant counts as reached within ``STEP_TOLERANCE`` = 1 % of the step (railfmu.models.base, model.h).
 
 Measured when written: with the former sample index ``floor(t / T + 1e-9)`` an accumulated
 clock lands on the previous noise sample from step 11,621 on at 1 ms (750,713 of 1e6 steps)
@@ -18,10 +18,10 @@ import re
 import numpy as np
 import pytest
 
-from fmus.cosim.slave import FMUError, Slave
-from models.base import STEP_TOLERANCE
-from models.sensors import N_CHANNELS, SensorNoise, noise, sample_index
-from models.step_source import STEP_SOURCE
+from railfmu.fmus.cosim.slave import FMUError, Slave
+from railfmu.models.base import STEP_TOLERANCE
+from railfmu.models.sources.sensors import N_CHANNELS, SensorNoise, noise, sample_index
+from railfmu.models.sources.step_source import STEP_SOURCE
 
 N = 10**6
 
@@ -33,7 +33,7 @@ def clocks(h: float, n: int = N) -> tuple[np.ndarray, np.ndarray]:
 
 
 def test_step_tolerance_is_one_value_in_c_and_python():
-    from fmus.generate.build import FMUS
+    from railfmu.fmus.generate.build import FMUS
 
     header = (FMUS / "native" / "runtime" / "model.h").read_text()
     (value,) = re.findall(r"^#define STEP_TOLERANCE (\S+)$", header, re.M)

@@ -10,10 +10,20 @@ from scipy.integrate import quad
 from fmpy import simulate_fmu
 from scipy.signal import periodogram, welch
 
-import models.track
-from models.track import (TRACK, ProfileTable, SplitMix64, TrackIrregularity, grid_size,
-                          psd_alignment, psd_crosslevel, psd_vertical, run_in_weight,
-                          spectral_lines, tabulation_error_bound)
+import railfmu.models.track.irregularity
+from railfmu.models.track.irregularity import (
+    TRACK,
+    ProfileTable,
+    SplitMix64,
+    TrackIrregularity,
+    grid_size,
+    psd_alignment,
+    psd_crosslevel,
+    psd_vertical,
+    run_in_weight,
+    spectral_lines,
+    tabulation_error_bound,
+)
 
 DS = 0.25  # m, spatial sampling of the spectral tests
 B = TRACK.variable("half_contact_width").start
@@ -406,7 +416,7 @@ def test_run_in_zero_does_not_evaluate_the_weight(monkeypatch):
     def boom(*_):
         raise AssertionError("run_in_weight evaluated with run_in_length = 0")
 
-    monkeypatch.setattr(models.track, "run_in_weight", boom)
+    monkeypatch.setattr(railfmu.models.track.irregularity, "run_in_weight", boom)
     tr = TrackIrregularity({"seed": 3, "harmonic_lateral_amplitude": 1e-3})
     r = tr.rails(np.linspace(-50.0, 50.0, 101))
     assert r["alignment"][0] != 0.0 and r["alignment_ds"][0] != 0.0

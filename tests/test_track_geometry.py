@@ -16,10 +16,17 @@ import pytest
 from scipy.integrate import quad
 from scipy.special import fresnel
 
-from fmus.errors import UserError
-from models import earth
-from models.track_geometry import (DEFAULT_TRACK, Alignment, TrackGeometry, chord_irregularity_along,
-                                   ecef_to_lla, irregularity_lines, vector_distance)
+from railfmu.models.errors import UserError
+from railfmu.models import earth
+from railfmu.models.track.geometry import (
+    DEFAULT_TRACK,
+    Alignment,
+    TrackGeometry,
+    chord_irregularity_along,
+    ecef_to_lla,
+    irregularity_lines,
+    vector_distance,
+)
 
 HEADER7 = "kind,start_m,end_m,radius_m,cant_mm,gradient_permille,transition\n"
 
@@ -276,7 +283,7 @@ def test_vector_distance_of_points_on_a_tilted_chord():
 
 
 def test_irregularity_lines_follow_the_spectrum():
-    from models.track import psd_alignment, psd_vertical
+    from railfmu.models.track.irregularity import psd_alignment, psd_vertical
     p = {"irregularity_level": 1, "irregularity_scale": 1.0, "irregularity_lines": 32, "lambda_min": 2.0,
          "lambda_max": 120.0, "irregularity_seed": 1}
     ln = irregularity_lines(p)

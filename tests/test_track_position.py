@@ -11,8 +11,8 @@ import math
 import numpy as np
 import pytest
 
-from fmus.cosim.slave import Slave
-from models.track import TRACK, TrackIrregularity, tabulation_error_bound
+from railfmu.fmus.cosim.slave import Slave
+from railfmu.models.track.irregularity import TRACK, TrackIrregularity, tabulation_error_bound
 
 OUT = [o.name for o in TRACK.outputs]
 # every component, and a step on the 5 ms grid at 20 m/s (s_1 = 100 m at t = 5.5 s)

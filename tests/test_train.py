@@ -9,10 +9,20 @@ import math
 import numpy as np
 import pytest
 
-from fmus.cosim.slave import FMUError, Slave
-from models.line_profile import DEFAULT_LINE, G0, LineProfile
-from models.train_longitudinal import (GAMMA, LOAD_MASS, MAX_DECELERATION, MAX_POWER,
-                                       MAX_TRACTION_FORCE, R0, R1, R2, TARE_MASS, Train)
+from railfmu.fmus.cosim.slave import FMUError, Slave
+from railfmu.models.track.line_profile import DEFAULT_LINE, G0, LineProfile
+from railfmu.models.train.longitudinal import (
+    GAMMA,
+    LOAD_MASS,
+    MAX_DECELERATION,
+    MAX_POWER,
+    MAX_TRACTION_FORCE,
+    R0,
+    R1,
+    R2,
+    TARE_MASS,
+    Train,
+)
 
 M_EFF = GAMMA * (TARE_MASS + LOAD_MASS)
 

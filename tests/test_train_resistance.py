@@ -19,9 +19,9 @@ import fmpy
 import numpy as np
 import pytest
 
-from models.line_profile import DEFAULT_LINE
-from models.sensors import noise
-from models.train_longitudinal import R0, R1, R2, davis_specific
+from railfmu.models.track.line_profile import DEFAULT_LINE
+from railfmu.models.sources.sensors import noise
+from railfmu.models.train.longitudinal import R0, R1, R2, davis_specific
 
 pytestmark = pytest.mark.skipif(shutil.which("gcc") is None or fmpy.platform != "linux64",
                                 reason="needs gcc on linux64")
@@ -34,7 +34,7 @@ SEED = 3
 
 
 def railfmu(*args, cwd=None):
-    return subprocess.run([sys.executable, "-m", "experiments.cli", *args], capture_output=True, text=True,
+    return subprocess.run([sys.executable, "-m", "railfmu.experiments.engine.cli", *args], capture_output=True, text=True,
                           cwd=cwd)
 
 
@@ -89,8 +89,8 @@ def test_standard_run_end_to_end(standard):
     # values (Table 1 sigmas, Q = 0), so its resistance error is the run's scatter
     assert e["speed_rmse_kmh"] < 1.0 and e["position_rmse_m"] < 8.0
     assert e["resistance_rel_error"] < 0.3 and 0 < e["seconds"] < 5
-    # regimes and features: the study's wiring equals estimators.driving_regimes.score on the CSVs
-    from estimators.driving_regimes import score
+    # regimes and features: the study's wiring equals railfmu.estimators.train.driving_regimes.score on the CSVs
+    from railfmu.estimators.train.driving_regimes import score
 
     every = np.flatnonzero(sig["gnss.valid"] == 1)
     style = {k: sig[f"driver.{k}"][0] for k in ("cruise_target", "traction_fraction",
@@ -153,7 +153,7 @@ def test_variants_set_the_truth_they_name(tmp_path, fmu_dir):
 
 def test_line_file_is_one_system_parameter(tmp_path, fmu_dir):
     """`--set line.file=...` reaches the train, the driver and every observer; a bad one is one line."""
-    from experiments.runner import find_experiment, load_system
+    from railfmu.experiments.engine.runner import find_experiment, load_system
 
     line = tmp_path / "my line.csv"
     shutil.copy(DEFAULT_LINE, line)
@@ -293,8 +293,8 @@ def test_the_67_run_study(tmp_path, fmu_dir):
     (('setting="ukf_paper.line_file"', 'setting="nobody.line_file"'), "Target setting 'nobody.line_file': no Observer 'nobody'"),
 ])
 def test_a_bad_system_parameter_is_one_line(edit, message, tmp_path, fmu_dir):
-    from fmus.errors import UserError
-    from fmus.ssp import read_system
+    from railfmu.models.errors import UserError
+    from railfmu.fmus.ssp import read_system
 
     exp = tmp_path / "exp"
     shutil.copytree(ROOT / "experiments" / "train_resistance", exp)

@@ -12,9 +12,9 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from fmus.cosim.slave import FMUError, Slave
-from models import earth
-from models.trolley import TROLLEY, TrolleyTwin
+from railfmu.fmus.cosim.slave import FMUError, Slave
+from railfmu.models import earth
+from railfmu.models.inertial.trolley import TROLLEY, TrolleyTwin
 
 REAL = [o.name for o in TROLLEY.outputs if o.type == "Real"]
 ANGLES = ("latitude", "longitude")
@@ -109,7 +109,7 @@ def test_angular_rates_are_continuous_at_element_ends(fmu_dir, run5, twin, tmp_p
     80 m: 6e-7 rad/s), as elsewhere. With linear transitions (same table, C = twin there too)
     the roll rate jumps by 0.1 m / (1.5 m 40 m) 1 m/s = 1.7e-3 rad/s at 80 m and the pitch
     rate by 8e-3 / 60 m 1 m/s = 1.3e-4 rad/s at 150 m."""
-    from models.track_geometry import DEFAULT_TRACK
+    from railfmu.models.track.geometry import DEFAULT_TRACK
 
     lin = tmp_path / "linear.csv"
     lin.write_text(DEFAULT_TRACK.read_text().replace(",bloss", ",linear"))
@@ -137,7 +137,7 @@ def test_angular_rates_are_continuous_at_element_ends(fmu_dir, run5, twin, tmp_p
 
 def test_increments_at_rest_are_earth_rate_and_gravity(run5):
     """(a) At rest the increments are C_n^b omega_ie^n dt and C_n^b (0, 0, -gamma(L, h)) dt
-    (models.earth, the Python formulas) to 1e-15 relative, dt the interval stepped."""
+    (railfmu.models.earth, the Python formulas) to 1e-15 relative, dt the interval stepped."""
     worst = 0.0
     for k in (1, 2, 1000, 1999, 15000, 15500):  # initial rest, the stop at 60 m (74-79 s)
         assert run5["stopped"][k] and run5["speed_along"][k] == 0.0
@@ -427,7 +427,7 @@ def test_quadrature_is_converged(monkeypatch):
     where the integrand is hardest: the ramps, the transitions, and a 2 mm wobble at 0.5 m
     wavelength and 2 m/s (25 rad/s, 1.3 m/s2): the default quadrature is off by < 1e-12 m/s
     there (measured 4e-13; 20 ms panels would give 5e-11), and to round-off elsewhere."""
-    import models.trolley as trolley
+    import railfmu.models.inertial.trolley as trolley
 
     tw = TrolleyTwin({"wobble_lateral": 2e-3, "wobble_vertical": 2e-3, "wobble_wavelength": 0.5,
                       "speed": 2.0})

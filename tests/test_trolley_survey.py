@@ -32,10 +32,10 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from estimators.strapdown import Strapdown
-from experiments.runner import run_experiment
-from experiments.trolley_survey import NAV, TRUTH_COLUMNS, navigation_errors
-from models import earth
+from railfmu.estimators.inertial.strapdown import Strapdown
+from railfmu.experiments.engine.runner import run_experiment
+from railfmu.experiments.trolley_survey import NAV, TRUTH_COLUMNS, navigation_errors
+from railfmu.models import earth
 
 pytestmark = pytest.mark.skipif(shutil.which("gcc") is None or fmpy.platform != "linux64",
                                 reason="needs gcc on linux64")
@@ -49,7 +49,7 @@ DEG = math.pi / 180
 
 
 def railfmu(*args, cwd=None):
-    return subprocess.run([sys.executable, "-m", "experiments.cli", *args], capture_output=True, text=True,
+    return subprocess.run([sys.executable, "-m", "railfmu.experiments.engine.cli", *args], capture_output=True, text=True,
                           cwd=cwd)
 
 
@@ -148,7 +148,7 @@ def test_an_angular_rate_jump_costs_the_two_sample_ins_a_velocity_step(survey, t
     integrates into position (0.0386 mm over the whole run at 5 ms). The data are exact there:
     an INS told the instant (it restarts its two-sample memory) has no step. With the bloss
     ramp (the shipped table) the roll rate is continuous and the plain INS has no step either."""
-    from models.track_geometry import DEFAULT_TRACK
+    from railfmu.models.track.geometry import DEFAULT_TRACK
 
     lin = tmp_path / "linear.csv"
     lin.write_text(DEFAULT_TRACK.read_text().replace(",bloss", ",linear"))
@@ -280,7 +280,7 @@ def _ssv(path: Path) -> dict[str, float]:
 @pytest.mark.parametrize("variant, grade", [("ideal_imu", "ideal"), ("navigation_grade", "navigation_grade"),
                                             ("tactical_grade", "tactical_grade"), ("mems_grade", "mems_grade")])
 def test_variant_is_the_grade_ssv(variant, grade):
-    from models.imu_errors import GRADES
+    from railfmu.models.inertial.imu_errors import GRADES
     v = _ssv(EXP / "variants" / f"{variant}.ssv")
     g = _ssv(EXP / "parameters" / f"imu_{grade}.ssv")
     assert v == {f"imu.{k}": x for k, x in g.items()}
@@ -299,17 +299,17 @@ def test_navigation_grade_short_run(tmp_path, fmu_dir):
 # -- observer settings bound to signals --------------------------------------------------------------
 
 def test_bound_settings_survive_export_and_a_value_overrides_them(tmp_path, fmu_dir):
-    from fmus.errors import UserError
-    from fmus.ssp import read_system, write_ssp
-    from fmus.generate.build import DEFAULT_OUT
+    from railfmu.models.errors import UserError
+    from railfmu.fmus.ssp import read_system, write_ssp
+    from railfmu.fmus.generate.build import default_out
 
-    system = read_system(REPLAY, fmu_dirs=[DEFAULT_OUT])
+    system = read_system(REPLAY, fmu_dirs=[default_out()])
     spec = system.observers[0]
     assert spec.setting_signals["latitude"] == "truth.y_1" and "latitude" not in spec.settings
     write_ssp(system, tmp_path / "r.ssp")
     again = read_system(tmp_path / "r.ssp").observers[0]
     assert again.setting_signals == spec.setting_signals and again.settings == spec.settings
-    given = read_system(REPLAY, fmu_dirs=[DEFAULT_OUT], overrides={"ins": {"latitude": 0.5}}).observers[0]
+    given = read_system(REPLAY, fmu_dirs=[default_out()], overrides={"ins": {"latitude": 0.5}}).observers[0]
     assert given.settings["latitude"] == 0.5 and "latitude" not in given.setting_signals
     bad = (REPLAY / "SystemStructure.ssd").read_text().replace(
         '<rf:Setting name="height" connector="truth.y_3"/>',
@@ -318,7 +318,7 @@ def test_bound_settings_survive_export_and_a_value_overrides_them(tmp_path, fmu_
     shutil.copytree(REPLAY, folder)
     (folder / "SystemStructure.ssd").write_text(bad)
     with pytest.raises(UserError, match="Setting 'height': give one of value, connector or parameter, not value and connector"):
-        read_system(folder, fmu_dirs=[DEFAULT_OUT])
+        read_system(folder, fmu_dirs=[default_out()])
 
 
 # -- libcosim ------------------------------------------------------------------------------------
@@ -336,8 +336,8 @@ def test_trolley_and_imu_errors_in_libcosim(tmp_path, fmu_dir):
     from libcosimpy.CosimLogging import CosimLogLevel, log_output_level
     from libcosimpy.CosimObserver import CosimObserver
 
-    from fmus.cosim.masters import run as run_master
-    from fmus.ssp import read_system
+    from railfmu.fmus.cosim.masters import run as run_master
+    from railfmu.fmus.ssp import read_system
 
     ssp = tmp_path / "survey.ssp"
     res = railfmu("export", "trolley_survey", "--variant", "navigation_grade", "--stop-time", "2", "-o", str(ssp))
@@ -453,9 +453,9 @@ PAPER = {"alignment": 0.99, "level": 0.70}  # Jiang et al. (2017), Fig. 12: RMS 
 
 
 def test_variants_are_what_variants_py_writes():
-    """variants/*.ssv are exactly what `python -m experiments.trolley_survey.variants` writes:
+    """variants/*.ssv are exactly what `python -m railfmu.experiments.trolley_survey.variants` writes:
     4 grades, paper_montecarlo, 5 aidings x 3 grades."""
-    from experiments.trolley_survey.variants import AIDINGS, variants
+    from railfmu.experiments.trolley_survey.variants import AIDINGS, variants
 
     written = variants()
     assert {p.stem: p.read_text() for p in (EXP / "variants").glob("*.ssv")} == written
@@ -467,11 +467,11 @@ def test_the_smoother_follows_the_grade_and_the_variant(fmu_dir):
     """The smoother's noise model is the grade the variant selects (settings bound to imu.*),
     also after a --set; paper_montecarlo shortens the run, switches the INS off and takes one
     ZUPT per stop; the experiment prefers the container master."""
-    from fmus.generate.build import DEFAULT_OUT
-    from fmus.ssp import read_system
-    from models.imu_errors import GRADES
+    from railfmu.fmus.generate.build import default_out
+    from railfmu.fmus.ssp import read_system
+    from railfmu.models.inertial.imu_errors import GRADES
 
-    s = read_system(EXP, variant="zupt_nhc_mems", fmu_dirs=[DEFAULT_OUT])
+    s = read_system(EXP, variant="zupt_nhc_mems", fmu_dirs=[default_out()])
     smoother = next(o for o in s.observers if o.name == "smoother")
     for k in ("gyro_arw_deg_sqrt_h", "gyro_bias_instability_deg_h", "accel_noise_ug_sqrt_hz",
               "accel_bias_instability_ug", "gyro_bias_correlation_time", "accel_bias_correlation_time"):
@@ -483,11 +483,11 @@ def test_the_smoother_follows_the_grade_and_the_variant(fmu_dir):
     assert smoother.settings["play_sigma_vertical"] == pytest.approx(5e-4 / math.sqrt(2), rel=1e-15)
     assert smoother.setting_parameters["play_wavelength"] == "trolley.wobble_wavelength"
     assert smoother.settings["play_wavelength"] == s.component("trolley").parameters["wobble_wavelength"] == 2.0
-    s = read_system(EXP, variant="zupt_nhc", fmu_dirs=[DEFAULT_OUT], overrides={"trolley": {"wobble_wavelength": 3.0}})
+    s = read_system(EXP, variant="zupt_nhc", fmu_dirs=[default_out()], overrides={"trolley": {"wobble_wavelength": 3.0}})
     assert next(o for o in s.observers if o.name == "smoother").settings["play_wavelength"] == 3.0
     assert not next(o for o in s.observers if o.name == "ins").enabled
     assert s.master == "container" and s.stop_time == 700.0
-    s = read_system(EXP, variant="paper_montecarlo", fmu_dirs=[DEFAULT_OUT],
+    s = read_system(EXP, variant="paper_montecarlo", fmu_dirs=[default_out()],
                     overrides={"imu": {"accel_noise_ug_sqrt_hz": "20"}})
     smoother = next(o for o in s.observers if o.name == "smoother")
     assert smoother.settings["accel_noise_ug_sqrt_hz"] == 20.0 and smoother.settings["gyro_arw_deg_sqrt_h"] == 0.005
@@ -501,7 +501,7 @@ def test_the_smoother_follows_the_grade_and_the_variant(fmu_dir):
 def paper_run(tmp_path_factory, fmu_dir):
     """One paper_montecarlo run with its files (seed 3), and its chord survey (the run's
     metrics, figures and series share it: the study module keeps the last one)."""
-    import experiments.trolley_survey as ts
+    import railfmu.experiments.trolley_survey as ts
 
     out = tmp_path_factory.mktemp("paper") / "run"
     m = run_experiment("trolley_survey", "paper_montecarlo", out=out, seed=3, progress=False, log=io.StringIO())
@@ -515,7 +515,11 @@ def test_paper_run_is_the_papers_nominal_run(paper_run):
     the paper's nominal run (0.979 / 0.695 mm); measured 0.998 / 0.712 mm (1.019 / 1.025). With
     the Trolley's default ramps (0.5 m/s2) it was 1.17 / 0.90. The ramps stay inside the 30 m:
     the one chord has all its 51 points, 0 to 25 m."""
-    from estimators.chord_accuracy import NOMINAL, nominal_chord_accuracy, nominal_run
+    from railfmu.estimators.inertial.chord_accuracy import (
+        NOMINAL,
+        nominal_chord_accuracy,
+        nominal_run,
+    )
 
     _, m, sr = paper_run
     assert (m["chords_surveyed"], m["chord_points"]) == (1, 51)
@@ -586,7 +590,7 @@ def test_pooled_peak_rms_of_hand_made_series():
     errors (mm) whose RMS over runs is 2 mm at 0.5 m and sqrt(14/3) mm at 1.0 m for alignment,
     sqrt(14/3) and sqrt(11/3) for level; runs of different chord points (or none) are refused, naming
     both; runs without chords give nothing."""
-    from experiments.trolley_survey.survey_accuracy import pooled_peak_rms
+    from railfmu.experiments.trolley_survey.survey_accuracy import pooled_peak_rms
 
     s = np.array([0.5, 1.0], dtype=np.float32)
 
@@ -609,7 +613,7 @@ def test_pooled_peak_rms_of_hand_made_series():
         pooled_peak_rms({**series, 5: {}})
     assert pooled_peak_rms({1: {}, 2: {}}) == {}
     # the study keeps its table and says why it did not pool
-    from experiments.trolley_survey import STUDY
+    from railfmu.experiments.trolley_survey import STUDY
 
     table = {"v": {"runs": {}, "summary": {}}}
     md = STUDY.study_tables(table, {"v": {**series, 5: {}}})
@@ -620,7 +624,7 @@ def test_pooled_peak_rms_of_hand_made_series():
 @pytest.fixture(scope="module")
 def reduced_monte_carlo(tmp_path_factory, fmu_dir):
     """20 runs of paper_montecarlo through the study (two Dask workers)."""
-    from experiments.study import run_study
+    from railfmu.experiments.engine.study import run_study
 
     out = tmp_path_factory.mktemp("mc20")
     table = run_study("trolley_survey", out, variants=["paper_montecarlo"], runs=20, log=io.StringIO())
@@ -670,7 +674,7 @@ def test_the_500_run_monte_carlo(tmp_path, fmu_dir):
     RMS of max 1.511 / 1.169 mm (alignment / level), predicted 1.505 / 1.190 (ratios 1.00 /
     1.02); peak RMS 0.975 / 0.698 mm, predicted peak sigma 1.012 / 0.725 (1.04 / 1.04), the
     paper's 0.99 / 0.70 to 1.5 % / 0.3 %."""
-    from experiments.study import run_study
+    from railfmu.experiments.engine.study import run_study
 
     table = run_study("trolley_survey", tmp_path, variants=["paper_montecarlo"], runs=500, log=sys.stderr)
     s = table["paper_montecarlo"]["summary"]
@@ -692,7 +696,7 @@ def test_nhc_and_odometer_reach_half_a_millimetre(tmp_path, fmu_dir):
     (the wobble is one sinusoid, narrower than the filter's play process) but not by more than
     2.5 times. 16 runs (75 s): 0.367 / 0.199 mm, predicted 0.599 / 0.388; over 500 runs
     (29 min): 0.352 / 0.198 mm, predicted 0.599 / 0.389. The white NHC (3 mm/s) gave 1.56 / 1.44 mm."""
-    from experiments.study import run_study
+    from railfmu.experiments.engine.study import run_study
 
     table = run_study("trolley_survey", tmp_path, variants=["zupt_nhc_odometer"], runs=16, log=sys.stderr)
     s = table["zupt_nhc_odometer"]["summary"]
@@ -706,7 +710,7 @@ def test_nhc_and_odometer_reach_half_a_millimetre(tmp_path, fmu_dir):
 def test_repeatability_over_six_runs_of_the_same_track(tmp_path, fmu_dir):
     """--runs 6 of an aided survey keeps the track (irregularity_seed) and draws new IMU errors
     (seed): the first 80 s of zupt_60m (two chords); Table 1's differences G1j and Fig. 15."""
-    from experiments.study import run_study
+    from railfmu.experiments.engine.study import run_study
 
     table = run_study("trolley_survey", tmp_path, variants=["zupt_60m"], runs=6, stop_time=80.0, log=io.StringIO())
     rows = table["zupt_60m"]["repeatability"]

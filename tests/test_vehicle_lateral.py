@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from fmus.cosim.slave import Slave
-from models.track import TrackIrregularity
-from models.vehicle_lateral import (
+from railfmu.fmus.cosim.slave import Slave
+from railfmu.models.track.irregularity import TrackIrregularity
+from railfmu.models.vehicle.vehicle_lateral import (
     VEHICLE_LATERAL,
     first_lateral_mode,
     kinematic_mode,

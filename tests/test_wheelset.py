@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from fmus.cosim.slave import Slave
-from models.wheelset import WHEELSET
+from railfmu.fmus.cosim.slave import Slave
+from railfmu.models.vehicle.wheelset import WHEELSET
 
 STATES = [s.name for s in WHEELSET.states]
 

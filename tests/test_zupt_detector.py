@@ -13,10 +13,16 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from estimators.zupt_detector import (NAVIGATION_GRADE, detect_stationary, detector_scores, noise_sigmas,
-                                      rest_threshold, shoe_statistic)
-from models import earth
-from models.imu_errors import GRADES
+from railfmu.estimators.inertial.zupt_detector import (
+    NAVIGATION_GRADE,
+    detect_stationary,
+    detector_scores,
+    noise_sigmas,
+    rest_threshold,
+    shoe_statistic,
+)
+from railfmu.models import earth
+from railfmu.models.inertial.imu_errors import GRADES
 
 DT = 0.005
 SA, SG = NAVIGATION_GRADE
@@ -27,7 +33,7 @@ def rest_increments(n: int, rng, sigma_a=SA, sigma_g=SG) -> np.ndarray:
     """IMU increments at rest, tilted and turned (C_b^n from roll 0.1, pitch -0.2, heading 1),
     at 30.5 deg N: gravity and the Earth rate in the body plus white noise of sigma_a, sigma_g
     per sample."""
-    from estimators.attitude import dcm_from_rph
+    from railfmu.estimators.inertial.attitude import dcm_from_rph
     C = dcm_from_rph(0.1, -0.2, 1.0)
     f = C.T @ np.array([0.0, 0.0, -G])
     w = C.T @ earth.earth_rate_n(math.radians(30.5))
@@ -127,7 +133,7 @@ def test_detector_on_a_short_navigation_grade_survey(tmp_path, fmu_dir):
     smooth speed ramp is still below 1e-5 m/s (measured: 0 misses, 5 false alarms at up to
     1.6e-6 m/s). On the whole 700 s run: 0 misses, 87 false alarms within 9 samples of the 11
     stops, no false stop."""
-    from experiments.runner import run_experiment
+    from railfmu.experiments.engine.runner import run_experiment
     out = tmp_path / "run"
     run_experiment("trolley_survey", "navigation_grade", out=out, stop_time=90.0, step_size=DT, master="container",
                    progress=False, log=io.StringIO())

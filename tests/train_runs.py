@@ -17,10 +17,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from models.driver import DriverTwin
-from models.gnss import Gnss
-from models.line_profile import DEFAULT_LINE, LineProfile
-from models.train_longitudinal import Train
+from railfmu.models.train.driver import DriverTwin
+from railfmu.models.train.gnss import Gnss
+from railfmu.models.track.line_profile import DEFAULT_LINE, LineProfile
+from railfmu.models.train.longitudinal import Train
 
 _LINE = LineProfile.read(DEFAULT_LINE)
 

@@ -11,7 +11,7 @@ is, the default) and ``conicity_minus10`` (the observers' conicity 10 % low, MuÃ
 Table 3).
 """
 
-from experiments.study_protocol import Study
+from railfmu.experiments.engine.study_protocol import Study
 
 PLOTS = {  # file -> (title, one list of (signal, label) per axis)
     "sensors.png": ("Replayed sensor signals",

@@ -1,7 +1,7 @@
 """Write the measured table this experiment replays: a run of ``track_wheelset`` as an axle-box
 logger would record it.
 
-    python -m experiments.alignment_replay.record [SECONDS]
+    python -m railfmu.experiments.alignment_replay.record [SECONDS]
 
 runs ``railfmu run track_wheelset --stop-time SECONDS`` (default 3 s of the ``psd`` variant:
 ERRI B176 low-level alignment at 20 m/s, 1 kHz) and keeps ``time,ddy,dpsi,ddy_f,alignment``
@@ -39,7 +39,7 @@ def table_from_signals(signals_csv: Path, out: Path) -> Path:
 
 def record(seconds: float = 3.0, out: Path = TABLE) -> Path:
     """Run track_wheelset for ``seconds`` and write its measured table to ``out``."""
-    from experiments.runner import run_experiment
+    from railfmu.experiments.engine.runner import run_experiment
 
     with tempfile.TemporaryDirectory() as tmp:
         run_experiment("track_wheelset", out=tmp, stop_time=seconds, progress=False)

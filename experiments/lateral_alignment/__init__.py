@@ -3,7 +3,7 @@
 The system is ``SystemStructure.ssd``: ERRI B176 lateral and vertical irregularities (400 m
 at 20 m/s) drive the complete vehicle model (VehicleLateral, 23 DOF); a SensorNoise FMU adds
 the paper's sensor noise to the leading wheelset's lateral acceleration and yaw rate and its
-bogie frame's lateral acceleration; the alignment Kalman filter (estimators.alignment, the
+bogie frame's lateral acceleration; the alignment Kalman filter (railfmu.estimators.track.alignment, the
 paper's eqs. 9-17 on the simplified model with the identified primary suspension) estimates
 the alignment online, and the RTS smoother (an offline observer, run on the record after the
 run) offline. Variants: the conditions of the paper's Tables 2-4.
@@ -24,8 +24,16 @@ from pathlib import Path
 
 import numpy as np
 
-from experiments.study_protocol import RunData, Study, measurement, observers_md, output, parameter, truth
-from fmus.errors import UserError
+from railfmu.experiments.engine.study_protocol import (
+    RunData,
+    Study,
+    measurement,
+    observers_md,
+    output,
+    parameter,
+    truth,
+)
+from railfmu.models.errors import UserError
 
 HERE = Path(__file__).resolve().parent
 DEFAULT_VARIANT = "standard"
@@ -87,19 +95,19 @@ def _ours(m: dict, key_j="J_mm", key_r="J_rel") -> list[str]:
 
 
 def first_lateral_mode() -> tuple[float, float, str]:
-    """models.vehicle_lateral.first_lateral_mode of the model's own parameters, cached beside
+    """railfmu.models.vehicle.vehicle_lateral.first_lateral_mode of the model's own parameters, cached beside
     the FMUs and keyed by the model sources: it derives the complete vehicle model (sympy,
     seconds), for one sentence of every report."""
-    from fmus.generate.build import DEFAULT_OUT, sources_key
+    from railfmu.fmus.generate.build import default_out, sources_key
 
-    cache, key = DEFAULT_OUT / ".first_lateral_mode.json", sources_key()
+    cache, key = default_out() / ".first_lateral_mode.json", sources_key()
     try:
         cached = json.loads(cache.read_text())
         if cached["key"] == key:
             return tuple(cached["mode"])
     except (OSError, ValueError, KeyError):
         pass
-    from models.vehicle_lateral import first_lateral_mode as derived
+    from railfmu.models.vehicle.vehicle_lateral import first_lateral_mode as derived
 
     mode = derived()
     cache.parent.mkdir(parents=True, exist_ok=True)
@@ -139,7 +147,7 @@ class LateralAlignment(Study):
         observer ``smoother``, run by the bank after the run), the observability rank, and the
         estimators' wall time on the recorded 20 s."""
         signals, estimates, base, roles = run.signals, run.estimates, run.base, run.roles
-        from estimators.metrics import alignment_errors
+        from railfmu.estimators.track.metrics import alignment_errors
 
         dt = base["step_size_s"]
         V = float(roles["speed"])
@@ -169,8 +177,8 @@ class LateralAlignment(Study):
         """Figs. 5, 6 and 8 of Muñoz et al.: estimate and smoothed estimate over the real alignment along
         the track, per EN 13848 band, with the wheelset's lateral displacement."""
         signals, estimates, metrics, roles = run.signals, run.estimates, run.base, run.roles
-        from estimators.metrics import bandpass
-        from experiments.plots import figure, x_axis
+        from railfmu.estimators.track.metrics import bandpass
+        from railfmu.experiments.engine.plots import figure, x_axis
 
         dt = metrics["step_size_s"]
         V = float(roles["speed"])

@@ -1,17 +1,17 @@
 """Identify the SM's primary suspension (kx, cx, ky, cy) against the CM and estimate the alignment
 filter's Q and R from the same CM run: Muñoz et al., §3.4 (eq. 8) and §4.2 (eqs. 28-31).
 
-    python -m experiments.lateral_alignment.identify [--stop-time 20] [--out .../identified.json]
+    python -m railfmu.experiments.lateral_alignment.identify [--stop-time 20] [--out .../identified.json]
 
-1. Builds the FMUs (fmus.generate.build.build_all; cached).
+1. Builds the FMUs (railfmu.fmus.generate.build.build_all; cached).
 2. Chooses ``psd_scale`` of the TrackIrregularity (ERRI B176 low level, seed 1) so that the
-   alignment under the leading wheelset, band-passed to 3-200 m (estimators.metrics.bandpass),
+   alignment under the leading wheelset, band-passed to 3-200 m (railfmu.estimators.track.metrics.bandpass),
    has an rms of 1.4 mm over the run (the amplitudes scale linearly with psd_scale).
 3. Runs the CM (VehicleLateral) on the container master, 1 ms steps, V = 20 m/s, driven by
    the track's *lateral* irregularity only: alignment_j and alignment_rate_j (j = 1..4) are
    connected, the vertical inputs keep 0 (the paper's §3.4: "only the lateral alignment ...
    has been included in simulations with both models").
-4. Identifies kx, cx, ky, cy (estimators.identification.identify_primary) from track.alignment_1,
+4. Identifies kx, cx, ky, cy (railfmu.estimators.track.identification.identify_primary) from track.alignment_1,
    alignment_rate_1 and vehicle.y_w1, psi_w1; then kx, cx alone with ky, cy at the paper's Table 1.
    On this CM the lateral pair (ky, cy) is practically unidentifiable from y and psi: any
    coupling that makes the SM's frame follow the wheelset fits alike (the four-parameter fit
@@ -19,7 +19,7 @@ filter's Q and R from the same CM run: Muñoz et al., §3.4 (eq. 8) and §4.2 (e
    < 0.2 %). When the two-parameter fit's cost is within ``IDENTIFIABLE_TOL`` of the
    four-parameter one, its values are the result (ky, cy stay at Table 1, which also keeps the
    filter's model well conditioned); both fits are written.
-5. Estimates Q and R (estimators.identification.estimate_noise) with the identified SM, from the
+5. Estimates Q and R (railfmu.estimators.track.identification.estimate_noise) with the identified SM, from the
    CM states mapped onto the filter's state (the frame is the bogie-1 point of the frame
    accelerometer) and the CM sensors contaminated with the paper's sensor noise (0.01 m/s2,
    5e-4 rad/s; numpy, seeded).
@@ -35,13 +35,13 @@ from pathlib import Path
 
 import numpy as np
 
-from estimators import identification as idn
-from estimators.metrics import bandpass, rms
-from fmus.generate.build import DEFAULT_OUT, build_all
-from fmus.cosim.masters import run
-from fmus.cosim.system import Component, Connection, System
-from models.track import TrackIrregularity
-from models.vehicle_lateral import VEHICLE_LATERAL
+from railfmu.estimators.track import identification as idn
+from railfmu.estimators.track.metrics import bandpass, rms
+from railfmu.fmus.generate.build import build_all, default_out
+from railfmu.fmus.cosim.masters import run
+from railfmu.fmus.cosim.system import Component, Connection, System
+from railfmu.models.track.irregularity import TrackIrregularity
+from railfmu.models.vehicle.vehicle_lateral import VEHICLE_LATERAL
 
 HERE = Path(__file__).resolve().parent
 V = 20.0
@@ -86,7 +86,7 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--stop-time", type=float, default=20.0, help="CM run length (s), default 20")
     ap.add_argument("--out", type=Path, default=HERE / "identified.json")
-    ap.add_argument("--fmu-dir", type=Path, default=Path(DEFAULT_OUT))
+    ap.add_argument("--fmu-dir", type=Path, default=Path(default_out()))
     args = ap.parse_args(argv)
     timings = {}
 
@@ -151,7 +151,7 @@ def main(argv: list[str] | None = None) -> int:
             "sensor_noise_added": {"sigma_acc": SIGMA_ACC, "sigma_gyro": SIGMA_GYRO, "rng_seed": NOISE_SEED},
             "with_initial_sm": noise_default.settings,
             "note": "AlignmentKalmanFilter settings at dt; q = Q_d/dt, sigma = sqrt(R); sigma_virtual is "
-                    "left to the filter's default (derived from q_xi); see estimators.identification",
+                    "left to the filter's default (derived from q_xi); see railfmu.estimators.track.identification",
         },
         "psd_scale": psd_scale,
         "alignment_rms_3_200_m": {"psd_scale_1": unit_rms, "target": TARGET_RMS,

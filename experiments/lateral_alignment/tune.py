@@ -1,7 +1,7 @@
 """Tune the alignment filter and fit the smoother's design model on a *training* track, not
 the one the study is scored on.
 
-    python -m experiments.lateral_alignment.tune [--out .../tuned.json] [--max-evaluations 600]
+    python -m railfmu.experiments.lateral_alignment.tune [--out .../tuned.json] [--max-evaluations 600]
 
 The study scores on track seed 39 (``parameters/track.ssv``: its band content is the closest
 of seeds 1-60 to the one Table 2 of Muñoz et al. implies). The identification
@@ -11,13 +11,13 @@ of seeds 1-60 to the one Table 2 of Muñoz et al. implies). The identification
 1. Runs the experiment's own system (``SystemStructure.ssd``, variant ``standard``: vertical
    irregularities, sensor noise) on the container master on the training track.
 2. **Filter** (online): the fixed-gain filter with the paper's identified SM, for every pair of
-   ``Q_XI`` x ``SIGMA_VIRTUAL``, scored as the study does (estimators.metrics.alignment_errors
+   ``Q_XI`` x ``SIGMA_VIRTUAL``, scored as the study does (railfmu.estimators.track.metrics.alignment_errors
    after the 20 m run-in); the pair with the smallest mean J_rel over the four bands (whole,
    D1, D2, D3) is the ``alignment`` observer's.
 
    Why these two: ``q_xi`` sets how fast the filter lets the alignment move, ``sigma_virtual``
    how hard the zero reading pins the common mode (the paper's eq. 17). The spectrum-based defaults
-   of estimators.alignment pin at 305 m and shrink the estimate by 7 % at every wavelength;
+   of railfmu.estimators.track.alignment pin at 305 m and shrink the estimate by 7 % at every wavelength;
    the tuned pair pins at ~0.1 rad/s (~1 km) and lets the sensors carry the 70-200 m band.
 3. **Smoother** (offline): with the tuned pair, the SM's equivalent parameters kx, cx, ky, cy,
    m_f, f11, f22 are fitted (Nelder-Mead in log space from the identified values, three
@@ -49,12 +49,12 @@ from pathlib import Path
 import numpy as np
 from scipy.optimize import minimize
 
-from estimators.alignment import AlignmentKalmanFilter
-from estimators.metrics import alignment_errors
-from experiments.runner import find_experiment, load_system
-from fmus.cosim.masters import run
+from railfmu.estimators.track.alignment import AlignmentKalmanFilter
+from railfmu.estimators.track.metrics import alignment_errors
+from railfmu.experiments.engine.runner import find_experiment, load_system
+from railfmu.fmus.cosim.masters import run
 
-from . import BANDS, SENSOR_ROLES, START_UP_S, STUDY
+from railfmu.experiments.lateral_alignment import BANDS, SENSOR_ROLES, START_UP_S, STUDY
 
 HERE = Path(__file__).resolve().parent
 TRAINING_TRACK = {"seed": 1, "psd_scale": 0.773}  # identify.py's track (1.4 mm over 3-200 m)

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from experiments.study_protocol import RunData, Study, observers_md, parameter, truth
+from railfmu.experiments.engine.study_protocol import RunData, Study, observers_md, parameter, truth
 
 DEFAULT_VARIANT = "step_fault"
 ESTIMATORS = ("paper_wls", "improved")
@@ -74,7 +74,7 @@ class SuspensionFault(Study):
         """``paper_wls`` and ``improved``: k1_true_final, k1_est_final, rel_error_final,
         convergence_time_s, and detection_delay_s when the variant has a fault."""
         signals, estimates, roles = run.signals, run.estimates, run.roles
-        from estimators.suspension import suspension_metrics
+        from railfmu.estimators.suspension.stiffness import suspension_metrics
 
         fault_time = _fault_time(roles)
         t = np.asarray(estimates["time"])
@@ -86,7 +86,7 @@ class SuspensionFault(Study):
         """Fig. 3 of Onat et al. (2016) (both k1 estimates and the true k1 over time); for ``step_response``
         also Fig. 2 (the first 10 s of the 1 mm step under both bogies)."""
         signals, estimates, metrics, roles = run.signals, run.estimates, run.base, run.roles
-        from experiments.plots import figure
+        from railfmu.experiments.engine.plots import figure
 
         files = []
         ts = np.asarray(signals["time"])

@@ -1,13 +1,13 @@
 """Track irregularity FMU driving the wheelset + suspended-frame lateral model (Muñoz et al., §3.3).
 
 The system is ``SystemStructure.ssd``: the track's alignment under the leading wheelset and
-its rate feed the wheelset model; an alignment Kalman filter (estimators.alignment) observes
+its rate feed the wheelset model; an alignment Kalman filter (railfmu.estimators.track.alignment) observes
 the wheelset's noise-free sensor outputs. Variants (``variants/*.ssv``): ``psd`` (ERRI B176
 low-level random alignment, the default) and ``harmonic`` (a 1 mm, 20 m alignment wave: the
 wheelset responds at V/lambda = 1 Hz).
 """
 
-from experiments.study_protocol import Study, output, truth
+from railfmu.experiments.engine.study_protocol import Study, output, truth
 
 DEFAULT_VARIANT = "psd"
 ROLES = {"alignment": truth("alignment", "xi"), "wheelset_y": output("wheelset", "y")}

@@ -38,8 +38,15 @@ from pathlib import Path
 
 import numpy as np
 
-from experiments.study_protocol import RunData, Study, observers_md, output, parameter, truth
-from fmus.errors import UserError
+from railfmu.experiments.engine.study_protocol import (
+    RunData,
+    Study,
+    observers_md,
+    output,
+    parameter,
+    truth,
+)
+from railfmu.models.errors import UserError
 
 KMH = 1.0 / 3.6
 DEFAULT_VARIANT = "standard"
@@ -108,12 +115,12 @@ def mass_effective(roles: dict) -> float:
 
 
 def regime_recognisers(system) -> dict[str, str]:
-    """Per observer the regime recogniser it is scored with (:data:`estimators.driving_regimes.RECOGNISERS`):
+    """Per observer the regime recogniser it is scored with (:data:`railfmu.estimators.train.recognisers.RECOGNISERS`):
     its SSD setting ``regime_recogniser``, else its class attribute of that name, else the
     paper's rules (``"paper"``): each estimator is scored as its author means it to be read."""
     import importlib
 
-    from estimators.driving_regimes import RECOGNISERS
+    from railfmu.estimators.train.recognisers import RECOGNISERS
 
     where = str(system.source or system.name)
     out = {}
@@ -134,14 +141,14 @@ def regime_recognisers(system) -> dict[str, str]:
 
 def regime_scores(run: RunData, name: str, fixes: np.ndarray) -> tuple[dict, dict]:
     """One estimator's driving regimes and features (Cunillera et al. (2022) §3.2-3.3, by
-    :func:`estimators.driving_regimes.score` with the estimator's recogniser,
+    :func:`railfmu.estimators.train.driving_regimes.score` with the estimator's recogniser,
     :func:`regime_recognisers`) at the GNSS fix rows ``fixes``: the issue's
     ``regime_accuracy``, ``max_power_rel_error``, ``max_effort_rel_error``,
     ``cruise_speed_error_kmh``, ``brake_rate_error`` (five, per ATB-EG step, None where the
     run has no braking fix there; also as ``brake_rate_error_step`` by step for the study's
     summary), the recognised regimes' ``regime_share`` of the running time and the
     ``features``; and the features' dict with its samples (the figures')."""
-    from estimators.driving_regimes import REGIME_NAMES, score
+    from railfmu.estimators.train.driving_regimes import REGIME_NAMES, score
 
     sig, est, roles = run.signals, run.estimates, run.roles
     t = np.asarray(est["time"])[fixes]
@@ -265,10 +272,10 @@ class TrainResistance(Study):
     @staticmethod
     def _truth(run: RunData, r_true: np.ndarray) -> dict:
         """The run's true resistance, the driver's style and, by the paper's definitions on the
-        driver's exact steps (:func:`estimators.driving_regimes.reference_features`), the shares
+        driver's exact steps (:func:`railfmu.estimators.train.driving_regimes.reference_features`), the shares
         of the regimes in the running time (standstill left out), the final coast and brake
         durations and the applied brake rate per ATB-EG step."""
-        from estimators.driving_regimes import reference_features, true_regimes
+        from railfmu.estimators.train.driving_regimes import reference_features, true_regimes
 
         sig, roles = run.signals, run.roles
         t, v, f = (np.asarray(sig[k]) for k in ("time", roles["v"], roles["effort"]))
@@ -313,7 +320,7 @@ class TrainResistance(Study):
         return {k: np.asarray(v, dtype=np.float32) for k, v in out.items()}
 
     def figures(self, run: RunData, out: Path) -> list[str]:
-        from . import figures
+        from railfmu.experiments.train_resistance import figures
 
         return figures.run_figures(run, out)
 
@@ -355,7 +362,7 @@ class TrainResistance(Study):
                      + "".join(f"{100 * metrics[n][f'{term}_share_max']:.0f} | " for n in scored)
                      + f"{100 * PAPER[f'{term}_share_max']:.0f} (Fig. 5) |")
         L += ["", "Truth: the paper's regime definitions on the driver's exact 1 s steps "
-              "(estimators.driving_regimes.reference_features); the cruise speed is the driver's target.",
+              "(railfmu.estimators.train.driving_regimes.reference_features); the cruise speed is the driver's target.",
               "", observers_md(metrics)]
         return "\n".join(L)
 
@@ -416,7 +423,7 @@ class TrainResistance(Study):
         return "\n".join(L)
 
     def study_figures(self, table: dict, series: dict, out: Path) -> list[str]:
-        from . import figures
+        from railfmu.experiments.train_resistance import figures
 
         return figures.study_figures(table, series, out)
 

@@ -11,10 +11,10 @@ from pathlib import Path
 
 import numpy as np
 
-from experiments.plots import _pyplot
-from models.train_longitudinal import R0, R1, R2
+from railfmu.experiments.engine.plots import _pyplot
+from railfmu.models.train.longitudinal import R0, R1, R2
 
-from . import ATB_EG, KMH, REGIME_COLOURS, REGIMES, estimators_of
+from railfmu.experiments.train_resistance import ATB_EG, KMH, REGIME_COLOURS, REGIMES, estimators_of
 
 COLOURS = ("C3", "C2", "C1", "C5")  # per estimator, in SSD order
 PUBLISHED = (R0, R1, R2)  # the estimators' default start: the 35 %-load mass-specific KISS values
@@ -87,9 +87,9 @@ def run_figures(run, out: Path) -> list[str]:
         files.append(_save(fig, out, "fig5_resistance_terms.png"))
 
     # Fig. 6: regimes along the run: the truth on the driver's steps, each estimator's recognised ones at its fixes
-    from estimators.driving_regimes import true_regimes
+    from railfmu.estimators.train.driving_regimes import true_regimes
 
-    from . import regime_scores
+    from railfmu.experiments.train_resistance import regime_scores
 
     panels = [("truth (the paper's definitions on the driver's 1 s steps)", t,
                true_regimes(t, sig[roles["v"]], sig[roles["effort"]]), sig[roles["v"]] / KMH)]

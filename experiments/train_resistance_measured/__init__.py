@@ -25,9 +25,16 @@ from pathlib import Path
 
 import numpy as np
 
-from experiments.study_protocol import RunData, Study, measurement, parameter
-from experiments.train_resistance import KMH, _f, _finite, estimators_of, regime_recognisers, resistance
-from fmus.errors import UserError
+from railfmu.experiments.engine.study_protocol import RunData, Study, measurement, parameter
+from railfmu.experiments.train_resistance import (
+    KMH,
+    _f,
+    _finite,
+    estimators_of,
+    regime_recognisers,
+    resistance,
+)
+from railfmu.models.errors import UserError
 
 REFERENCE = "ukf_paper"
 ROLES = {"position": measurement(REFERENCE, "position"), "speed": measurement(REFERENCE, "speed"),
@@ -37,12 +44,13 @@ PLOTS = {"measured.png": ("The replayed run", [[("position", "position [m]")], [
 
 def features_of(t: np.ndarray, est: dict, name: str, recogniser_name: str = "paper") -> dict:
     """The §3.3 features of one estimator's outputs at the fixes (Cunillera et al. (2022),
-    :func:`estimators.driving_regimes.features` on the regimes its recogniser ``recogniser_name``
-    reads, :func:`experiments.train_resistance.regime_recognisers`); mass-specific (a
+    :func:`railfmu.estimators.train.driving_regimes.features` on the regimes its recogniser ``recogniser_name``
+    reads, :func:`railfmu.experiments.train_resistance.regime_recognisers`); mass-specific (a
     measured run carries no mass): ``max_power_w_per_kg``, ``max_effort_n_per_kg``, the
     cruise speed, final coast and brake durations, the brake rate per ATB-EG step and the
     recognised regimes' shares of the running time. None where a feature is undefined."""
-    from estimators.driving_regimes import REGIME_NAMES, features, recogniser
+    from railfmu.estimators.train.driving_regimes import REGIME_NAMES, features
+    from railfmu.estimators.train.recognisers import recogniser
 
     v, a, f = (np.asarray(est[f"{name}.{k}"]) for k in ("v", "acceleration", "effort"))
     regimes = recogniser(recogniser_name)(t, v, a, f)
@@ -153,7 +161,7 @@ class TrainResistanceMeasured(Study):
         return "\n".join(L)
 
     def figures(self, run: RunData, out: Path) -> list[str]:
-        from experiments.plots import figure
+        from railfmu.experiments.engine.plots import figure
 
         est = run.estimates
         t = np.asarray(est["time"])

@@ -1,7 +1,7 @@
 """Write the example measured run this experiment replays: one simulated run of
 ``train_resistance`` as an operator's GNSS log would hold it.
 
-    python -m experiments.train_resistance_measured.record [SEED]
+    python -m railfmu.experiments.train_resistance_measured.record [SEED]
 
 runs ``railfmu run train_resistance`` (variant ``standard``, default seed 1) and keeps, at
 each GNSS fix (every 10 s), ``time_s``, the measured ``position_m`` (4 m noise, written to
@@ -34,7 +34,7 @@ def table_from_signals(signals_csv: Path, out: Path) -> Path:
 
 
 def record(seed: int = 1, out: Path = TABLE) -> Path:
-    from experiments.runner import run_experiment
+    from railfmu.experiments.engine.runner import run_experiment
 
     with tempfile.TemporaryDirectory() as tmp:
         run_experiment("train_resistance", "standard", out=tmp, seed=seed, progress=False)

@@ -2,7 +2,7 @@
 
 ``SystemStructure.ssd``: a SignalTable FMU plays ``imu.csv`` (the standard form of
 ``trolley_survey``: ``time_s, dtheta_x, dtheta_y, dtheta_z, dv_x, dv_y, dv_z``) into the
-free-inertial strapdown INS (:class:`estimators.ins_observer.StrapdownINS`); a second one plays
+free-inertial strapdown INS (:class:`railfmu.estimators.inertial.ins_observer.StrapdownINS`); a second one plays
 ``truth.csv``, whose first row is the INS's initial state (settings bound to its channels)
 and against which it is scored, with the metrics and figures of ``trolley_survey``. The IMU
 table's end ends the run. Shipped: the first 15 s of an ideal-IMU ``trolley_survey`` run
@@ -19,9 +19,17 @@ from pathlib import Path
 
 import numpy as np
 
-from experiments.study_protocol import RunData, Study, observers_md, output
-from experiments.trolley_survey import (ERRORS, INCREMENTS, NAV, UNITS, error_metrics, ins_error_figure,
-                                        metric_name, navigation_errors)
+from railfmu.experiments.engine.study_protocol import RunData, Study, observers_md, output
+from railfmu.experiments.trolley_survey import (
+    ERRORS,
+    INCREMENTS,
+    NAV,
+    UNITS,
+    error_metrics,
+    ins_error_figure,
+    metric_name,
+    navigation_errors,
+)
 
 DEG = math.pi / 180
 #: truth.csv's channels on the truth table: (column, NAV name or None, factor to rad/m/(m/s))

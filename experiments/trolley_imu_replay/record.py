@@ -2,7 +2,7 @@
 ``truth.csv`` of a ``trolley_survey`` run (ideal IMU: 10 s at rest, then the start of the
 first run to the 60 m stop).
 
-    python -m experiments.trolley_imu_replay.record [--duration 15] [--from DIR]
+    python -m railfmu.experiments.trolley_imu_replay.record [--duration 15] [--from DIR]
 
 ``--from`` a finished run's folder (default: run ``trolley_survey`` for ``--duration`` s).
 """
@@ -38,7 +38,7 @@ def main(argv=None) -> int:
     with tempfile.TemporaryDirectory() as tmp:
         run = args.run
         if run is None:
-            from experiments.runner import run_experiment
+            from railfmu.experiments.engine.runner import run_experiment
             run = Path(tmp) / "run"
             run_experiment("trolley_survey", "ideal_imu", out=run, stop_time=args.duration, progress=False,
                            log=io.StringIO())

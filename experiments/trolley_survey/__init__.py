@@ -4,18 +4,18 @@ The system is ``SystemStructure.ssd``: the ``Trolley`` FMU is pushed along 600 m
 graded track with ERRI B176 alignment and level irregularities, stopping every 60 m, and
 gives the ideal IMU increments over each 5 ms step (200 Hz) and its true navigation state;
 the ``ImuErrors`` FMU adds the errors of one IMU grade; the observer ``ins``
-(:class:`estimators.ins_observer.StrapdownINS`) integrates the measured increments from the
+(:class:`railfmu.estimators.inertial.ins_observer.StrapdownINS`) integrates the measured increments from the
 trolley's state at the first sample (its settings are bound to the trolley's outputs) and is
 scored against the trolley's state. The offline observer ``smoother``
-(:class:`estimators.aided_ins.AidedInsSmoother`: error-state Kalman filter with feedback and
+(:class:`railfmu.estimators.inertial.aided_ins.AidedInsSmoother`: error-state Kalman filter with feedback and
 RTS smoother) runs on the whole record after the run with ZUPTs from the trolley's
 ``stopped`` flag (optionally NHC, odometer, landmark fixes), its initial attitude and
 velocity errors drawn per run (SensorNoise ``initial_errors``: 0.006°, 0.006°, 0.06°, 1e-4
 m/s; the initial position error is not drawn, a common offset does not change a chord), its
 noise model the selected grade (settings bound to ``imu.*``). Its accuracy on 30 m chords is
-:mod:`experiments.trolley_survey.survey_accuracy`.
+:mod:`railfmu.experiments.trolley_survey.survey_accuracy`.
 
-Variants (written by :mod:`experiments.trolley_survey.variants`): ``ideal_imu`` (the numerical
+Variants (written by :mod:`railfmu.experiments.trolley_survey.variants`): ``ideal_imu`` (the numerical
 floor: the data and the INS are exact to < 0.01 mm and 1e-6 rad), ``navigation_grade`` (the
 paper's IMU), ``tactical_grade``, ``mems_grade``; ``paper_montecarlo`` (the paper's 30 m
 simulation; ``railfmu study trolley_survey --variant paper_montecarlo --runs 500``);
@@ -24,7 +24,7 @@ simulation; ``railfmu study trolley_survey --variant paper_montecarlo --runs 500
 says otherwise (its SSD's ``rf:FixedStep master``).
 
 Every run writes, besides ``signals.csv``, the two standard files (documented here, read by
-:func:`estimators.ins_observer.read_imu_csv` and by the ``trolley_imu_replay`` experiment):
+:func:`railfmu.estimators.inertial.ins_observer.read_imu_csv` and by the ``trolley_imu_replay`` experiment):
 
 * ``imu.csv``: ``time_s, dtheta_x, dtheta_y, dtheta_z`` (rad), ``dv_x, dv_y, dv_z`` (m/s):
   the *measured* increments (the ImuErrors outputs), body forward-right-down, each over the
@@ -36,7 +36,7 @@ Every run writes, besides ``signals.csv``, the two standard files (documented he
 Floats are written with ``repr`` (they read back to the same double).
 
 Metrics (``metrics.json``): with the smoother, those of
-:mod:`experiments.trolley_survey.survey_accuracy` (``chord_alignment_max_error_mm``,
+:mod:`railfmu.experiments.trolley_survey.survey_accuracy` (``chord_alignment_max_error_mm``,
 ``chord_level_max_error_mm``, ``chord_alignment_rms_error_mm``, ``chord_level_rms_error_mm``,
 ``predicted_sigma_alignment_mm``, ``predicted_sigma_level_mm``, ``filter_seconds``,
 ``smoother_seconds``); over a Monte Carlo (``--runs N``) the study's summary adds the peak RMS
@@ -57,8 +57,14 @@ from pathlib import Path
 
 import numpy as np
 
-from experiments.study_protocol import RunData, Study, observers_md, output, parameter
-from fmus.errors import UserError
+from railfmu.experiments.engine.study_protocol import (
+    RunData,
+    Study,
+    observers_md,
+    output,
+    parameter,
+)
+from railfmu.models.errors import UserError
 
 NAV = ("latitude", "longitude", "height", "vn", "ve", "vd", "roll", "pitch", "heading")
 INCREMENTS = ("dtheta_x", "dtheta_y", "dtheta_z", "dv_x", "dv_y", "dv_z")
@@ -90,7 +96,7 @@ def metric_name(kind: str, suffix: str = "") -> str:
 def position_errors(est: np.ndarray, true: np.ndarray) -> np.ndarray:
     """Estimate minus truth of rows of :data:`NAV` (or of latitude, longitude, height): (n, 3)
     NED in m, the latitude and longitude differences times the local radii plus height."""
-    from estimators.ins_error_model import ned_difference
+    from railfmu.estimators.inertial.ins_error_model import ned_difference
 
     return ned_difference(est[:, 0], est[:, 1], est[:, 2], true[:, 0], true[:, 1], true[:, 2])
 
@@ -99,10 +105,10 @@ def navigation_errors(est: np.ndarray, true: np.ndarray) -> dict[str, np.ndarray
     """INS minus truth, rows of :data:`NAV` (rad, m, m/s): ``position`` (n, 3) NED in m (the
     latitude and longitude differences times the local radii plus height), ``velocity``
     (n, 3) NED in m/s, ``attitude`` (n, 3) in rad: the NED rotation vector ``e`` with
-    ``C_est = exp([e x]) C_true`` (``estimators.attitude.perturb``'s convention)."""
+    ``C_est = exp([e x]) C_true`` (``railfmu.estimators.inertial.attitude.perturb``'s convention)."""
     from scipy.spatial.transform import Rotation
 
-    from estimators.attitude import dcm_from_rph
+    from railfmu.estimators.inertial.attitude import dcm_from_rph
 
     position = position_errors(est, true)
     C = dcm_from_rph(*est[:, 6:9].T) @ np.swapaxes(dcm_from_rph(*true[:, 6:9].T), 1, 2)
@@ -128,7 +134,7 @@ def error_metrics(t: np.ndarray, errors: dict[str, np.ndarray], motion_start: fl
 def ins_error_figure(out: Path, title: str, t: np.ndarray, est: np.ndarray, true: np.ndarray) -> str:
     """``ins_errors.png``: position and velocity errors (N, E, D) and attitude errors (tilt N,
     tilt E, heading) of the INS against the truth over time."""
-    from experiments.plots import figure
+    from railfmu.experiments.engine.plots import figure
 
     e = navigation_errors(est, true)
     axes = [[(f"position {c}", 1e3 * e["position"][:, j], "mm") for j, c in enumerate("NED")],
@@ -155,7 +161,7 @@ def _motion_start(run: RunData) -> float:
 
 def write_standard_files(run: RunData, out: Path) -> list[str]:
     """``imu.csv`` and ``truth.csv`` (module docstring) of a run."""
-    from fmus.cosim.recorder import CsvRecorder
+    from railfmu.experiments.engine.recorder import CsvRecorder
 
     s, r = run.signals, run.roles
     t = np.asarray(s["time"])
@@ -176,10 +182,10 @@ def write_standard_files(run: RunData, out: Path) -> list[str]:
 
 
 def track_geometry(roles: dict):
-    """The run's track (:class:`models.track_geometry.TrackGeometry`) from the trolley's
+    """The run's track (:class:`railfmu.models.track.geometry.TrackGeometry`) from the trolley's
     parameters as the SSP binds them; the shipped table when ``track_file`` is the FMU's
     resource."""
-    from models.track_geometry import DEFAULT_TRACK, TrackGeometry
+    from railfmu.models.track.geometry import DEFAULT_TRACK, TrackGeometry
 
     params = {k: roles[f"track_{k}"] for k in GEOMETRY if k != "track_file"}
     name = str(roles["track_track_file"])
@@ -198,7 +204,7 @@ def _survey(run: RunData):
     """The run's chord accuracy (:class:`survey_accuracy.SurveyRun`), None without the smoother;
     built once per run (the runner hands metrics, series and figures the same signals and
     observer objects in fresh RunData)."""
-    from .survey_accuracy import SMOOTHER, SurveyRun
+    from railfmu.experiments.trolley_survey.survey_accuracy import SMOOTHER, SurveyRun
 
     obs = run.observers.get(SMOOTHER)
     if obs is None:
@@ -237,7 +243,7 @@ class TrolleySurvey(Study):
         """The two Monte Carlo statistics beside their predictions and the paper
         (:func:`survey_accuracy.montecarlo_rows`; the pooled peak RMS is in the summary since
         :meth:`study_tables` ran first), the aiding table, then the statistics of every metric."""
-        from .survey_accuracy import aiding_rows, montecarlo_rows
+        from railfmu.experiments.trolley_survey.survey_accuracy import aiding_rows, montecarlo_rows
 
         L = montecarlo_rows(summary)
         values = {v: (st["chord_alignment_max_error_mm"]["rms"], st["chord_level_max_error_mm"]["rms"])
@@ -251,7 +257,11 @@ class TrolleySurvey(Study):
         (:func:`survey_accuracy.pooled_peak_rms`: into its ``summary``, plain numbers beside the
         statistics over runs; a refusal to pool runs of different chord points goes there as
         ``chord_peak_rms_refused`` and into table.md) and the repeatability (Table 1)."""
-        from .survey_accuracy import pooled_peak_rms, repeatability, repeatability_rows
+        from railfmu.experiments.trolley_survey.survey_accuracy import (
+            pooled_peak_rms,
+            repeatability,
+            repeatability_rows,
+        )
 
         L = []
         for v, runs in series.items():
@@ -269,14 +279,17 @@ class TrolleySurvey(Study):
     def study_figures(self, table: dict, series: dict, out: Path) -> list[str]:
         """``max_error_histograms.png`` (Fig. 12) and, per variant with chords, the first chord's
         estimates over the runs (``repeatability_<variant>.png``, Fig. 15)."""
-        from .survey_accuracy import histogram_figure, repeatability_figure
+        from railfmu.experiments.trolley_survey.survey_accuracy import (
+            histogram_figure,
+            repeatability_figure,
+        )
 
         files = [f for f in [histogram_figure(out, table)] if f]
         for v, runs in series.items():
             first = next(iter(table[v]["runs"].values()), {})
             truth = None
             try:
-                from models.track_geometry import chord_irregularity
+                from railfmu.models.track.geometry import chord_irregularity
                 track = track_geometry(first.get("roles", {}))
                 s = np.arange(0.0, 25.0 + 1e-9, 0.5)
                 truth = (s, *chord_irregularity(track.rail_positions, track.design_positions, s, 0.0))
@@ -301,9 +314,13 @@ class TrolleySurvey(Study):
             files.append(ins_error_figure(out, "Free-inertial INS errors (INS minus truth)", t, est, true))
         sr = _survey(run)
         if sr is not None:
-            from experiments.plots import figure
+            from railfmu.experiments.engine.plots import figure
 
-            from .survey_accuracy import irregularity_figure, sensitivity_figures, trajectory_figure
+            from railfmu.experiments.trolley_survey.survey_accuracy import (
+                irregularity_figure,
+                sensitivity_figures,
+                trajectory_figure,
+            )
 
             files.append(figure(out, "smoother_errors.png", "Smoothed position error and its predicted sigma",
                                 sr.t, "time [s]",
@@ -324,7 +341,7 @@ class TrolleySurvey(Study):
         return files
 
     def _track_figures(self, run: RunData, out: Path) -> list[str]:
-        from experiments.plots import _pyplot, figure
+        from railfmu.experiments.engine.plots import _pyplot, figure
 
         s, r = run.signals, run.roles
         ts = np.asarray(s["time"])
@@ -393,7 +410,7 @@ class TrolleySurvey(Study):
     def table_md(self, table: dict[str, dict]) -> str:
         """The aiding table (what each aiding buys, per grade), the chord errors of every
         variant with the smoother, and the free-inertial INS errors of those with the INS."""
-        from .survey_accuracy import aiding_rows
+        from railfmu.experiments.trolley_survey.survey_accuracy import aiding_rows
 
         L = []
         chords = {v: m for v, m in table.items() if "chord_alignment_max_error_mm" in m}

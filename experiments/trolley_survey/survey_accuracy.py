@@ -2,19 +2,19 @@ r"""The aided survey's accuracy on 30 m chords (Jiang et al. (2017), §§ 5-6): 
 Monte Carlo, and their figures.
 
 Per run (:func:`chord_metrics`), from the offline observer ``smoother``
-(:class:`estimators.aided_ins.AidedInsSmoother`) and the trolley's truth:
+(:class:`railfmu.estimators.inertial.aided_ins.AidedInsSmoother`) and the trolley's truth:
 
-* the smoothed position error ``e`` (local NED, m; :func:`experiments.trolley_survey.position_errors`)
-  at the samples of the survey's chord grid (:func:`estimators.chord_accuracy.chord_grid` on the
+* the smoothed position error ``e`` (local NED, m; :func:`railfmu.experiments.trolley_survey.position_errors`)
+  at the samples of the survey's chord grid (:func:`railfmu.estimators.inertial.chord_accuracy.chord_grid` on the
   trolley's true ``distance``: 0.5 m spacing, consecutive 30 m chords, 5 m offset);
-* the chord errors of every surveyed point, exact (:func:`estimators.chord_accuracy.chord_errors`
+* the chord errors of every surveyed point, exact (:func:`railfmu.estimators.inertial.chord_accuracy.chord_errors`
   with the trolley's true n0 positions), the max ``|error|`` over the run (the issue's
   statistic) and the rms: ``chord_alignment_max_error_mm``, ``chord_level_max_error_mm``,
   ``chord_alignment_rms_error_mm``, ``chord_level_rms_error_mm``;
 * the prediction of that statistic from the smoother's joint Gaussian of the errors:
   :data:`PREDICTION_SAMPLES` draws at the grid's epochs (``smoother.error_samples``, seeded by
   the run's seed, 0 without one) through the same exact chord errors, ``sqrt(mean max^2)``
-  (:func:`estimators.chord_accuracy.survey_chords` does both):
+  (:func:`railfmu.estimators.inertial.chord_accuracy.survey_chords` does both):
   ``predicted_sigma_alignment_mm``, ``predicted_sigma_level_mm`` (over a Monte Carlo the mean of
   the per-run predictions sits beside the RMS over runs of the max errors);
 * ``filter_seconds``, ``smoother_seconds`` (the observer's own split; its INS integration is
@@ -35,7 +35,7 @@ side by side (:func:`montecarlo_rows`):
 Jiang et al. (2017)'s Fig. 12 figures (0.99 / 0.70 mm) are the peak RMS: the paper says its
 Monte Carlo "is consistent to the result calculated by the covariance analysis previously",
 and that analysis (the largest pointwise sigma, Figs. 8-11) reproduced at the paper's nominal
-run gives 0.979 / 0.695 mm (:func:`estimators.chord_accuracy.nominal_chord_accuracy`), while the
+run gives 0.979 / 0.695 mm (:func:`railfmu.estimators.inertial.chord_accuracy.nominal_chord_accuracy`), while the
 RMS of the max of the same errors is 1.5-1.7 times larger (a max over 51 correlated points;
 1.49 / 1.18 mm there).
 
@@ -52,7 +52,12 @@ from pathlib import Path
 
 import numpy as np
 
-from estimators.chord_accuracy import DEFAULT_SAMPLES, ChordGrid, chord_errors, survey_chords
+from railfmu.estimators.inertial.chord_accuracy import (
+    DEFAULT_SAMPLES,
+    ChordGrid,
+    chord_errors,
+    survey_chords,
+)
 
 SMOOTHER = "smoother"
 PREDICTION_SAMPLES = DEFAULT_SAMPLES  # 500: ~1.7 % relative standard error per run (the mean over N runs: / sqrt(N))
@@ -60,7 +65,7 @@ REPEATABILITY_RUNS = 6  # Jiang et al. (2017), Table 1 and Fig. 15: six runs ove
 #: Jiang et al. (2017), Fig. 12 (500 runs): the peak RMS over runs of the chord error (module docstring)
 PAPER_MAX_ERROR_MM = {"alignment": 0.99, "level": 0.70}
 #: the covariance analysis of the paper's nominal constant-speed run, largest pointwise sigma (mm):
-#: estimators.chord_accuracy.nominal_chord_accuracy(nominal_run(), **NOMINAL) (tests/test_chord_accuracy.py)
+#: railfmu.estimators.inertial.chord_accuracy.nominal_chord_accuracy(nominal_run(), **NOMINAL) (tests/test_chord_accuracy.py)
 NOMINAL_PEAK_SIGMA_MM = {"alignment": 0.979, "level": 0.695}
 CHORD_METRICS = ("chord_alignment_max_error_mm", "chord_level_max_error_mm", "chord_alignment_rms_error_mm",
                  "chord_level_rms_error_mm", "predicted_sigma_alignment_mm", "predicted_sigma_level_mm",
@@ -109,10 +114,10 @@ class SurveyRun:
     def pointwise_sigma(self) -> tuple[np.ndarray, np.ndarray]:
         """The exact pointwise sigma (mm) of the chord errors, alignment and level at
         ``grid.s``: the smoother's joint covariance of the position errors at the grid's epochs
-        through :func:`estimators.chord_accuracy.chord_sigma_from_covariance` (its blocks grow
+        through :func:`railfmu.estimators.inertial.chord_accuracy.chord_sigma_from_covariance` (its blocks grow
         as the square of the grid: for tests and short runs; the metrics sample instead)."""
-        from estimators.chord_accuracy import chord_sigma_from_covariance
-        from estimators.ins_error_model import DR
+        from railfmu.estimators.inertial.chord_accuracy import chord_sigma_from_covariance
+        from railfmu.estimators.inertial.ins_error_model import DR
 
         g = self.grid
         epochs, inverse = np.unique(self.obs.nearest_epochs(self.t[g.sample]), return_inverse=True)
@@ -141,7 +146,7 @@ def irregularity_figure(out: Path, sr: SurveyRun, track, title: str) -> str:
     """``chord_irregularity.png`` (Jiang et al. (2017), Figs. 12/14): estimated and true
     irregularity along the track with the pointwise predicted 1-sigma band, alignment and
     level, and their errors."""
-    from experiments.plots import _pyplot
+    from railfmu.experiments.engine.plots import _pyplot
 
     plt = _pyplot()
     ta, tv = sr.truth_irregularity(track)
@@ -179,7 +184,7 @@ def irregularity_figure(out: Path, sr: SurveyRun, track, title: str) -> str:
 def trajectory_figure(out: Path, sr: SurveyRun, length: float = 60.0) -> str:
     """``trajectory_3d.png`` (Fig. 14c): the first ``length`` m, true and smoothed, in n0
     (north, east, up; m), with the smoothed error magnified in a second panel."""
-    from experiments.plots import _pyplot
+    from railfmu.experiments.engine.plots import _pyplot
 
     plt = _pyplot()
     keep = sr.distance <= sr.distance[0] + length
@@ -203,7 +208,7 @@ def trajectory_figure(out: Path, sr: SurveyRun, length: float = 60.0) -> str:
     return "trajectory_3d.png"
 
 
-#: Jiang et al. (2017), Figs. 8-11: the settings each figure varies (estimators.chord_accuracy.SENSITIVITY_AXES)
+#: Jiang et al. (2017), Figs. 8-11: the settings each figure varies (railfmu.estimators.inertial.chord_accuracy.SENSITIVITY_AXES)
 SENSITIVITY_FIGURES = {8: ("velocity-update accuracy", ("zupt_sigma",)),
                        9: ("sensor noise", ("gyro_arw_deg_sqrt_h", "accel_noise_ug_sqrt_hz")),
                        10: ("initial attitude errors", ("tilt_sigma", "heading_sigma")),
@@ -213,11 +218,11 @@ SENSITIVITY_FIGURES = {8: ("velocity-update accuracy", ("zupt_sigma",)),
 def sensitivity_figures(out: Path) -> list[str]:
     """``sensitivity_fig8.png`` ... ``fig11.png`` (Jiang et al. (2017), Figs. 8-11): the largest
     pointwise sigma of the 30 m chord errors against one setting at a time, the others at the
-    paper's nominal, from :func:`estimators.chord_accuracy.sensitivity_curves` (the covariance
+    paper's nominal, from :func:`railfmu.estimators.inertial.chord_accuracy.sensitivity_curves` (the covariance
     analysis of the paper's constant-speed run; every other value of its axes, to keep a run's
     figures to seconds)."""
-    from estimators.chord_accuracy import SENSITIVITY_AXES, sensitivity_curves
-    from experiments.plots import _pyplot
+    from railfmu.estimators.inertial.chord_accuracy import SENSITIVITY_AXES, sensitivity_curves
+    from railfmu.experiments.engine.plots import _pyplot
 
     axes = {k: (v[0][::2] if v[0].size > 3 else v[0], *v[1:]) for k, v in SENSITIVITY_AXES.items()}
     curves = sensitivity_curves(axes)
@@ -328,14 +333,14 @@ def montecarlo_rows(summary: dict[str, dict]) -> list[str]:
             "the result calculated by the covariance analysis previously\", the largest pointwise σ of "
             "Figs. 8-11, and that covariance analysis at the paper's nominal constant-speed run gives "
             f"{NOMINAL_PEAK_SIGMA_MM['alignment']:.3f} / {NOMINAL_PEAK_SIGMA_MM['level']:.3f} mm here "
-            "(`estimators.chord_accuracy.nominal_chord_accuracy`); the RMS of the max of the same errors is "
+            "(`railfmu.estimators.inertial.chord_accuracy.nominal_chord_accuracy`); the RMS of the max of the same errors is "
             "1.5-1.7 times larger (1.49 / 1.18 mm there)."]
 
 
 def aiding_rows(values: dict[str, tuple[float, float]], how: str) -> list[str]:
     """The aiding table: what each aiding buys (rows) per IMU grade (columns), from
     ``values[variant] = (alignment, level)`` in mm; absent variants are '-'."""
-    from .variants import AIDINGS
+    from railfmu.experiments.trolley_survey.variants import AIDINGS
 
     grades = (("navigation", ""), ("tactical", "_tactical"), ("mems", "_mems"))
     present = [g for g in grades if any(f"{a}{g[1]}" in values for a in AIDINGS)]
@@ -393,7 +398,7 @@ def histogram_figure(out: Path, table: dict) -> str | None:
     chord errors, with their RMS and its mean prediction marked, and the pointwise statistic
     (the peak RMS over runs and the predicted peak sigma, when the summary has them) and the
     paper's figure, which is a peak RMS."""
-    from experiments.plots import _pyplot
+    from railfmu.experiments.engine.plots import _pyplot
 
     variants = [v for v, t in table.items()
                 if any("chord_alignment_max_error_mm" in m for m in t["runs"].values())]
@@ -432,7 +437,7 @@ def repeatability_figure(out: Path, variant: str, series: dict[int, dict[str, np
     """``repeatability_<variant>.png`` (Fig. 15): the estimated irregularity of the first
     chord in each run (truth + that run's chord error) over the true one. ``truth``: ``(s,
     alignment, level)`` of the first chord (m) or None (then the errors alone)."""
-    from experiments.plots import _pyplot
+    from railfmu.experiments.engine.plots import _pyplot
 
     seeds = [s for s in sorted(series) if series[s].get("chord_s") is not None][:REPEATABILITY_RUNS]
     if len(seeds) < 2:

@@ -1,4 +1,4 @@
-"""Writes ``variants/*.ssv`` of the trolley survey: ``python -m experiments.trolley_survey.variants``.
+"""Writes ``variants/*.ssv`` of the trolley survey: ``python -m railfmu.experiments.trolley_survey.variants``.
 
 Every variant carries one whole IMU grade (the ``ImuErrors`` parameters of
 ``parameters/imu_<grade>.ssv``, each as ``imu.<parameter>``; the smoother's noise model follows
@@ -19,7 +19,7 @@ changes in the trolley, the observers and the run:
   is short (the chord's first point is the record's first sample, 0.1 s before the ZUPT). With
   them the largest pointwise sigma of the chord errors (exact, from the smoother's joint
   covariance) is 0.998 / 0.712 mm (alignment / level), 1.019 / 1.025 times the covariance
-  analysis of the paper's constant-speed run (``estimators.chord_accuracy.nominal_chord_accuracy``:
+  analysis of the paper's constant-speed run (``railfmu.estimators.inertial.chord_accuracy.nominal_chord_accuracy``:
   0.979 / 0.695 mm); with the Trolley's default ramps (0.5 m/s2: 4 s and 2 m) and a 1 s rest it
   was 1.17 / 0.90 mm; 2 m/s2 gives 1.04 / 1.06 times, 10 m/s2 1.011 / 1.013. The ramps lie
   inside the 30 m: the chord grid still has all 51 points, 0 to 25 m;
@@ -32,8 +32,8 @@ changes in the trolley, the observers and the run:
   a state of the filter: 0.1 mm/s at 1 m/s, under its 1 mm/s sigma); the INS off. With the NHC
   or the odometer the smoother runs the 15-state error model (``full15``: they observe the
   tilts, so the horizontal accelerometer biases can no longer hide in them, and the 12-state
-  model becomes overconfident in height; ``estimators.aided_ins``). The NHC knows the wobble
-  as the wheel-rail play (``play_model="shaping"``, ``estimators.rail_play``): four states,
+  model becomes overconfident in height; ``railfmu.estimators.inertial.aided_ins``). The NHC knows the wobble
+  as the wheel-rail play (``play_model="shaping"``, ``railfmu.estimators.inertial.rail_play``): four states,
   the body's lateral and vertical offset from the rail and their slopes, stationary sigmas the
   wobble's rms (a sinusoid of amplitude ``a``: ``a / sqrt(2)``, 0.71 and 0.35 mm), wavelength
   the trolley's ``wobble_wavelength`` (the SSD binds ``play_wavelength`` to it), damping 0.1
@@ -68,7 +68,7 @@ GRADE_VARIANTS = {"ideal_imu": "ideal", "navigation_grade": "navigation", "tacti
 #: the aided 600 m surveys: what every one of them changes, then each aiding's own settings
 AIDED_SURVEY = {"ins.enabled": False, "trolley.wobble_lateral": 0.001, "trolley.wobble_vertical": 0.0005,
                 "trolley.wobble_wavelength": 2.0, "trolley.odometer_scale_ppm": 100.0}
-#: the NHC with the play as shaping-filter states (estimators.rail_play; module docstring)
+#: the NHC with the play as shaping-filter states (railfmu.estimators.inertial.rail_play; module docstring)
 NHC = {"smoother.nhc": True, "smoother.play_model": "shaping",
        "smoother.play_sigma_lateral": AIDED_SURVEY["trolley.wobble_lateral"] / math.sqrt(2.0),
        "smoother.play_sigma_vertical": AIDED_SURVEY["trolley.wobble_vertical"] / math.sqrt(2.0),

@@ -76,9 +76,9 @@ from fmpy.model_description import (
     write_model_description,
 )
 
-from ..errors import UserError
-from .slave import Slave
-from .system import System, check_system, recorded_signals
+from railfmu.models.errors import UserError
+from railfmu.fmus.cosim.slave import Slave
+from railfmu.fmus.cosim.system import System, check_system, recorded_signals
 
 DRIVER_SOURCE = Path(__file__).parent.parent / "native" / "runtime" / "container_driver.c"
 
@@ -141,7 +141,7 @@ def apply_parameters(slave: Slave, values: list[tuple[str, str, object]]) -> Non
 
 def check_containable(system: System) -> None:
     """UserError for what the container cannot run (before anything is built): besides
-    :func:`fmus.cosim.system.check_system`, maps other than the identity and two FMU files
+    :func:`railfmu.fmus.cosim.system.check_system`, maps other than the identity and two FMU files
     of one name."""
     check_system(system)
     for c in system.connections:
@@ -224,7 +224,7 @@ def configuration(system: System, values: bool = True) -> Configuration:
     md = ModelDescription(
         fmiVersion="2.0", modelName=system.name or "system", instantiationToken=token,
         description=f"railfmu container of {system.name} (FMPy container FMU)",
-        generationTool="railfmu (fmus.cosim.container)",
+        generationTool="railfmu (railfmu.fmus.cosim.container)",
         coSimulation=CoSimulation(modelIdentifier="container_fmu", fixedInternalStepSize=system.step_size),
         defaultExperiment=DefaultExperiment(startTime=repr(system.start_time), stopTime=repr(system.stop_time),
                                             stepSize=repr(system.step_size)),

@@ -1,4 +1,4 @@
-"""Fixed-step co-simulation masters for a :class:`fmus.cosim.system.System`.
+"""Fixed-step co-simulation masters for a :class:`railfmu.fmus.cosim.system.System`.
 
 Three masters, one time grid ``t_k = start + k h`` (k = 0 .. n), one sample per grid point
 (n + 1 rows: ``time`` and the recorded signals), handed to the sinks as the run goes:
@@ -19,10 +19,10 @@ Three masters, one time grid ``t_k = start + k h`` (k = 0 .. n), one sample per 
     its output) is refused: Gauss-Seidel does not iterate.
 
 ``container``
-    The system as one FMPy container FMU (:mod:`fmus.cosim.container`), stepped by a small C loop
+    The system as one FMPy container FMU (:mod:`railfmu.fmus.cosim.container`), stepped by a small C loop
     (doStep + getReal into a numpy buffer; a ctypes loop without a C compiler). The
     container couples like Jacobi, and its samples equal the ``jacobi`` master's bit for bit
-    (asserted by tests/test_masters.py); see :mod:`fmus.cosim.container`.
+    (asserted by tests/test_masters.py); see :mod:`railfmu.fmus.cosim.container`.
 
 What a sample at t_k holds, for every master: every FMU has stepped to t_k (Gauss-Seidel:
 with its own coupling); then every connection has been copied from the outputs at t_k
@@ -47,7 +47,7 @@ FMI 2.0 status semantics, in every master: ``fmi2Discard`` from ``fmi2DoStep`` f
 point (``RunResult.early_end``; every row up to it is there and the sinks close as
 complete); any other ``fmi2Discard``, ``fmi2Error`` or ``fmi2Fatal`` is an error naming the
 component and the status (``X.fmu (name): what failed: <what the FMU logged, or the status>``,
-the wording of :class:`fmus.cosim.slave.Slave`). The container reports one status for all
+the wording of :class:`railfmu.fmus.cosim.slave.Slave`). The container reports one status for all
 its components, so on either the run up to that step is replayed with the Jacobi master
 (same samples, bit for bit) to name the inner component.
 """
@@ -65,9 +65,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..errors import UserError
-from .slave import Slave, Status
-from .system import Connection, Sink, System, check_system, recorded_signals
+from railfmu.models.errors import UserError
+from railfmu.fmus.cosim.slave import Slave, Status
+from railfmu.fmus.cosim.system import Connection, Sink, System, check_system, recorded_signals
 
 MASTERS = ("jacobi", "gauss-seidel", "container")
 BLOCK_ROWS = 1000  # container path: rows per C call / per write_block
@@ -496,7 +496,7 @@ DRIVER_OK, DRIVER_DO_STEP_FAILED, DRIVER_GET_FAILED, DRIVER_NON_FINITE, DRIVER_T
 
 
 def _run_container(system: System, sinks: Sequence[Sink], progress: bool) -> RunResult:
-    from .container import (
+    from railfmu.fmus.cosim.container import (
         ContainerSlave,
         apply_parameters,
         cached_container_dir,

@@ -42,8 +42,8 @@ import numpy as np
 from fmpy.fmi1 import FMICallException
 from fmpy.fmi2 import fmi2False, fmi2FMUstate, fmi2Real, fmi2ValueReference
 
-from ..errors import UserError
-from .slave import Slave
+from railfmu.models.errors import UserError
+from railfmu.fmus.cosim.slave import Slave
 
 # a filter time this close to the instance's (in steps dt) is the same communication point
 _SAME_TIME = 1e-6

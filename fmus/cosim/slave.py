@@ -17,7 +17,7 @@ from fmpy.fmi1 import FMICallException
 from fmpy.fmi2 import (FMU2Slave, fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFreeMemoryTYPE,
                        fmi2CallbackFunctions, fmi2CallbackLoggerTYPE)
 
-from ..errors import UserError
+from railfmu.models.errors import UserError
 
 
 
@@ -74,7 +74,7 @@ class Slave:
     def __init__(self, fmu: Path | str, instance_name: str = "instance", logging_on: bool = False,
                  md=None):
         """``md``: the FMU's model description when the caller has read it already
-        (:attr:`fmus.cosim.system.Component.md`)."""
+        (:attr:`railfmu.fmus.cosim.system.Component.md`)."""
         fmu = Path(fmu)
         if not fmu.is_file():
             raise UserError(f"{fmu}: FMU not found (run `railfmu build`)")

@@ -23,7 +23,7 @@ from typing import Protocol
 
 import numpy as np
 
-from ..errors import UserError
+from railfmu.models.errors import UserError
 
 Value = float | int | bool | str
 SIGNAL_TYPES = ("Real", "Integer", "Boolean")  # what a connection carries and signals.csv records
@@ -96,7 +96,7 @@ class ObserverSpec:
     ``period``: its sample period in s (None: the system's step); ``event``: its
     measurements arrive as events (None: as its class declares); ``offline``: run once on
     the whole record after the run. ``units``: the unit of each bound signal that has one
-    (an ``fmus.ssp.units.Unit``), for the bank's unit checks.
+    (an ``railfmu.fmus.ssp.units.Unit``), for the bank's unit checks.
     """
     name: str
     cls: str

@@ -13,21 +13,21 @@ import os
 import re
 import shutil
 import subprocess
+import sys
 import tempfile
 import threading
 import zipfile
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
-from models.base import Model
+from railfmu.models.base import Model
 
-from . import codegen
+from railfmu.fmus.generate import codegen
 
 HERE = Path(__file__).resolve().parent
 FMUS = HERE.parent
 RUNTIME_DIR = FMUS / "native" / "runtime"
 CSRC_DIR = FMUS / "native" / "models"
-DEFAULT_OUT = FMUS.parent / "build" / "fmus"
 PLATFORM = "linux64"
 CFLAGS = ["-std=c99", "-O2", "-fPIC", "-shared", "-fvisibility=hidden", "-Wall", "-Wextra", "-Werror"]
 FMI_HEADERS = ["fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h"]
@@ -97,6 +97,22 @@ def sources_key() -> str:
     return h.hexdigest()
 
 
+def cache_root() -> Path:
+    """The per-user cache: ``$RAILFMU_CACHE``, else ``$XDG_CACHE_HOME/railfmu``, else
+    ``~/.cache/railfmu``. Never inside the installed package (read-only on a shared install,
+    and not in pip's install record)."""
+    if os.environ.get("RAILFMU_CACHE"):
+        return Path(os.environ["RAILFMU_CACHE"]).expanduser()
+    base = os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache"
+    return Path(base).expanduser() / "railfmu"
+
+
+def default_out() -> Path:
+    """Where ``railfmu build`` and every run put the FMUs: one folder of the cache per
+    :func:`sources_key`, so two versions of railfmu never overwrite each other's FMUs."""
+    return cache_root() / "fmus" / sources_key()[:16]
+
+
 def definition_key(model: Model | str) -> str:
     """The key of one FMU (a model or its identifier): :func:`sources_key` and its name. Equal
     keys give equal FMUs, so a build can be skipped without running the generator (sympy
@@ -143,11 +159,11 @@ def _key_file(target: Path) -> Path:
     return target.with_name(f".{target.stem}.key")
 
 
-def build_fmu(model: Model, out_dir: Path | str = DEFAULT_OUT, force: bool = False) -> Path:
+def build_fmu(model: Model, out_dir: Path | str | None = None, force: bool = False) -> Path:
     """Build ``<out_dir>/<identifier>.fmu``; returns its path. Skips everything when the FMU
     there was built from the same definitions (:func:`definition_key`), and the compiler when
     an FMU with the same GUID is already there (unless ``force``)."""
-    out_dir = Path(out_dir)
+    out_dir = default_out() if out_dir is None else Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     target = out_dir / f"{model.identifier}.fmu"
     key = definition_key(model)
@@ -205,23 +221,37 @@ def build_fmu(model: Model, out_dir: Path | str = DEFAULT_OUT, force: bool = Fal
     return target
 
 
-def build_all(out_dir: Path | str = DEFAULT_OUT, models: list[Model] | None = None,
-              force: bool = False) -> list[Path]:
-    """Build every model (``models``, default the build list ``models.all_models``); when the
-    whole list is asked for and :func:`sources_key` is the one of its last build, returns its
-    FMUs without deriving any model."""
-    out_dir = Path(out_dir)
+def build_all(out_dir: Path | str | None = None, models: list[Model] | None = None,
+              force: bool = False, progress: bool = True) -> list[Path]:
+    """Build every model (``models``, default the build list ``railfmu.models.all_models``) into
+    ``out_dir`` (default :func:`default_out`); when the whole list is asked for and
+    :func:`sources_key` is the one of its last build, returns its FMUs without deriving any
+    model. ``progress`` prints a line per FMU to stderr when anything is built."""
+    out_dir = default_out() if out_dir is None else Path(out_dir)
     if models is None and not force:
         current = _current_from_manifest(out_dir)
         if current is not None:
             return current
-    from models import all_models
+    from railfmu.models import all_models
 
     everything = models is None
     models = all_models() if models is None else models
     key = sources_key()  # before building: an edit during the build must not be recorded as built
+    done = [0]
+    if progress:
+        print(f"railfmu: building {len(models)} FMUs into {out_dir} (once per version of the "
+              f"sources, ~30 s)", file=sys.stderr, flush=True)
+
+    def one(m: Model) -> Path:
+        path = build_fmu(m, out_dir, force)
+        if progress:
+            with _XML_LOCK:
+                done[0] += 1
+                print(f"  [{done[0]}/{len(models)}] {m.identifier}", file=sys.stderr, flush=True)
+        return path
+
     with ThreadPoolExecutor(max_workers=min(4, os.cpu_count() or 1)) as pool:
-        paths = list(pool.map(lambda m: build_fmu(m, out_dir, force), models))
+        paths = list(pool.map(one, models))
     if everything:
         rows = [f"{p.stem} {_guid_in_archive(p)}" for p in paths]
         tmp = _manifest(out_dir).with_name(f".railfmu-build.{os.getpid()}.part")

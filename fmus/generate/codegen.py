@@ -19,9 +19,9 @@ from xml.sax.saxutils import quoteattr
 
 import sympy as sp
 
-from models.base import STEP_SIZE, Model, Output, Parameter, Variable
+from railfmu.models.base import STEP_SIZE, Model, Output, Parameter, Variable
 
-from ..units import UNITS, check_unit
+from railfmu.fmus.units import UNITS, check_unit
 
 GENERATOR = "railfmu"
 TAU = sp.Symbol("tau", real=True)  # time since the inputs were set (first-order hold)
@@ -314,7 +314,7 @@ def _output_target(o: Output) -> str:
 
 def _convert_discrete(line: str, model: Model) -> str:
     """``m->i[VRI_n] = e;`` -> lround(e); ``m->b[VRB_f] = e;`` -> (e) != 0 (module docstring of
-    models.base); ``end_now = e;`` likewise."""
+    railfmu.models.base); ``end_now = e;`` likewise."""
     head, sep, expr = line.partition(" = ")
     target = head.strip()
     if not sep or not expr.endswith(";"):

@@ -9,10 +9,10 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from ..errors import UserError
-from .units import Affine, UnitError, Units, conversion, from_ssc
-from .xmltools import NS, SSC_NS, SSV_NS, children, local
-from ..cosim.system import Value
+from railfmu.models.errors import UserError
+from railfmu.fmus.ssp.units import Affine, UnitError, Units, conversion, from_ssc
+from railfmu.fmus.ssp.xmltools import NS, SSC_NS, SSV_NS, children, local
+from railfmu.fmus.cosim.system import Value
 
 _TRANSFORMS = ("LinearTransformation", "BooleanMappingTransformation", "IntegerMappingTransformation",
                "EnumerationMappingTransformation")

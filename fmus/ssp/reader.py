@@ -1,4 +1,4 @@
-"""SSP 1.0 experiments as a :class:`fmus.cosim.system.System`: read, check, validate, write back.
+"""SSP 1.0 experiments as a :class:`railfmu.fmus.cosim.system.System`: read, check, validate, write back.
 
 :func:`read_system` applies what FMPy's own SSP support skips: parameter bindings in the SSD
 (inline and ``.ssv``), ``.ssm`` mappings, ``ssc:LinearTransformation``, unit checks and
@@ -22,7 +22,7 @@ annotation; a variant is ours).
 
 Every problem a user can cause is a one-line :class:`UserError` naming the file (with its
 line), the element and what is wrong; the system read is checked as every master checks it
-(:func:`fmus.cosim.system.check_system`), so ``railfmu validate`` reports what a run would
+(:func:`railfmu.fmus.cosim.system.check_system`), so ``railfmu validate`` reports what a run would
 refuse. Unknown parameter names are errors even where SSP lets a tool ignore them: a typo in
 a study must not pass silently.
 
@@ -39,8 +39,8 @@ from pathlib import Path
 
 from lxml import etree
 
-from ..errors import UserError
-from .params import (
+from railfmu.models.errors import UserError
+from railfmu.fmus.ssp.params import (
     ParamValue,
     apply_mapping,
     from_cli,
@@ -49,7 +49,7 @@ from .params import (
     read_parameter_set,
     why_not_settable,
 )
-from .units import (
+from railfmu.fmus.ssp.units import (
     IDENTITY,
     OURS,
     Affine,
@@ -62,8 +62,8 @@ from .units import (
     from_ssc,
     tidy,
 )
-from .writer import write_ssp
-from .xmltools import (
+from railfmu.fmus.ssp.writer import write_ssp
+from railfmu.fmus.ssp.xmltools import (
     NS,
     SSC_NS,
     Root,
@@ -75,7 +75,7 @@ from .xmltools import (
     parse_xml,
     schema_problems,
 )
-from ..cosim.system import (
+from railfmu.fmus.cosim.system import (
     Component,
     Connection,
     ObserverSpec,
@@ -129,9 +129,9 @@ def _variants(root: Root) -> list[str]:
 def validate_ssp(path, fmu_dirs=()) -> list[str]:
     """Every problem found in an SSP: schema errors of each .ssd/.ssv/.ssm, unresolved
     references (the first per variant), and each contained FMU's problems
-    (:func:`fmus.generate.build.validate`). [] if none. Raises only if ``path`` does not exist.
+    (:func:`railfmu.fmus.generate.build.validate`). [] if none. Raises only if ``path`` does not exist.
     ``fmu_dirs``: where to look for FMUs the SSP does not contain (an experiment folder)."""
-    from ..generate.build import validate
+    from railfmu.fmus.generate.build import validate
 
     given = Path(path)
     if not given.exists():
@@ -634,7 +634,7 @@ class _Reader:
         el = a.find("rf:FixedStep", NS) if a is not None else None
         if el is None or el.get("master") is None:
             return None
-        from ..cosim.masters import MASTERS
+        from railfmu.fmus.cosim.masters import MASTERS
 
         name = el.get("master")
         if name not in MASTERS:

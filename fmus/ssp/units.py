@@ -11,7 +11,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from ..units import UNITS
+from railfmu.fmus.units import UNITS
 
 BASE = ("kg", "m", "s", "A", "K", "mol", "cd", "rad")
 

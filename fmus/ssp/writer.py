@@ -1,4 +1,4 @@
-"""A :class:`fmus.cosim.system.System` as a self-contained ``.ssp``: ``SystemStructure.ssd`` plus its
+"""A :class:`railfmu.fmus.cosim.system.System` as a self-contained ``.ssp``: ``SystemStructure.ssd`` plus its
 FMUs in ``resources/``.
 
 What other importers need is kept explicit: every component carries ONE inline
@@ -25,8 +25,8 @@ from pathlib import Path
 
 from lxml import etree
 
-from .units import BASE, OURS, Units, from_fmu
-from .xmltools import (
+from railfmu.fmus.ssp.units import BASE, OURS, Units, from_fmu
+from railfmu.fmus.ssp.xmltools import (
     NS,
     OMS_NS,
     OSP_NS,
@@ -36,7 +36,7 @@ from .xmltools import (
     SSV_NS,
     schema_problems,
 )
-from ..cosim.system import System, check_system
+from railfmu.fmus.cosim.system import System, check_system
 
 _KINDS = ("input", "output", "parameter", "calculatedParameter")  # causalities a connector can show
 

@@ -20,7 +20,7 @@ from urllib.parse import unquote, urlparse
 import fmpy
 from lxml import etree
 
-from ..errors import UserError
+from railfmu.models.errors import UserError
 
 SSD_NS = "http://ssp-standard.org/SSP1/SystemStructureDescription"
 SSC_NS = "http://ssp-standard.org/SSP1/SystemStructureCommon"

@@ -13,7 +13,7 @@
 static const double PI = 3.14159265358979323846;
 static const uint64_t GAMMA = UINT64_C(0x9E3779B97F4A7C15);
 
-/* as SensorNoise.c and models.sensors.noise (channel 1 of the seed's stream) */
+/* as SensorNoise.c and railfmu.models.sources.sensors.noise (channel 1 of the seed's stream) */
 static uint64_t mix64(uint64_t z) {
     z = (z ^ (z >> 30)) * UINT64_C(0xBF58476D1CE4E5B9);
     z = (z ^ (z >> 27)) * UINT64_C(0x94D049BB133111EB);

@@ -70,7 +70,7 @@ typedef struct {
     double noise_si[2], tc[2]; /* per triad */
 } Constants;
 
-/* ---- the noise: models.sensors.noise for any stream (models.imu_errors.gauss) ---- */
+/* ---- the noise: railfmu.models.sources.sensors.noise for any stream (railfmu.models.inertial.imu_errors.gauss) ---- */
 
 static uint64_t mix64(uint64_t z) {
     z = (z ^ (z >> 30)) * UINT64_C(0xBF58476D1CE4E5B9);
@@ -91,7 +91,7 @@ static double gauss(uint64_t seed, unsigned stream, uint64_t k) {
 static double noise_si(int s) { return s == 0 ? PI / 180.0 / 60.0 : 1e-6 * G0; }
 static double bias_si(int s) { return s == 0 ? PI / 180.0 / 3600.0 : 1e-6 * G0; }
 
-/* ---- the Gauss-Markov bias over one step (models.imu_errors.gm_f, gm_step) ---- */
+/* ---- the Gauss-Markov bias over one step (railfmu.models.inertial.imu_errors.gm_f, gm_step) ---- */
 
 /* f(x) = x - 2 (1 - e^-x) + (1 - e^-2x) / 2, summed as its series below SERIES_BELOW */
 static double gm_f(double x) {

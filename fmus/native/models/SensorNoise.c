@@ -37,9 +37,9 @@ static const fmi2ValueReference VR_GAIN[N_CHANNELS] = {
 static const fmi2ValueReference VR_BIAS[N_CHANNELS] = {
     VR_bias_1, VR_bias_2, VR_bias_3, VR_bias_4, VR_bias_5, VR_bias_6, VR_bias_7, VR_bias_8};
 
-/* ---- the noise: identical to models.sensors.noise ---- */
+/* ---- the noise: identical to railfmu.models.sources.sensors.noise ---- */
 
-/* SplitMix64's output function (Steele, Lea & Flood 2014), as models.track.SplitMix64 */
+/* SplitMix64's output function (Steele, Lea & Flood 2014), as railfmu.models.track.irregularity.SplitMix64 */
 static uint64_t mix64(uint64_t z) {
     z = (z ^ (z >> 30)) * UINT64_C(0xBF58476D1CE4E5B9);
     z = (z ^ (z >> 27)) * UINT64_C(0x94D049BB133111EB);

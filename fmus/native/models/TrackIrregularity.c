@@ -8,7 +8,7 @@
  * in the imaginary part); the outputs interpolate the table with cubic Hermite polynomials.
  * Deterministic parts: harmonic, step, measured profile table (CSV, Catmull-Rom Hermite).
  * Run-in (run_in_length > 0): the sum times a raised-cosine weight of s, rates by the product
- * rule (as models.track.run_in_weight and TrackIrregularity.rails).
+ * rule (as railfmu.models.track.irregularity.run_in_weight and TrackIrregularity.rails).
  * Position: s_1 = s_start + V t at constant speed, or s_start + distance with the speed v
  * from the inputs (distance_input = true); rates d/dt = v d/ds. The step counts as reached
  * within STEP_TOLERANCE |v| h of a communication point (model.h).
@@ -64,7 +64,7 @@ typedef struct {
     double *tab_s, *tab_y, *tab_dy;
 } TrackData;
 
-/* ---- SplitMix64 (Steele, Lea & Flood 2014), identical to models.track.SplitMix64 ---- */
+/* ---- SplitMix64 (Steele, Lea & Flood 2014), identical to railfmu.models.track.irregularity.SplitMix64 ---- */
 static uint64_t splitmix64_next(uint64_t *state) {
     uint64_t z = (*state += UINT64_C(0x9E3779B97F4A7C15));
     z = (z ^ (z >> 30)) * UINT64_C(0xBF58476D1CE4E5B9);
@@ -92,7 +92,7 @@ static double psd_channel(int channel, int level, double omega, double b) {
     }
 }
 
-/* ---- grid size: as models.track.grid_size ---- */
+/* ---- grid size: as railfmu.models.track.irregularity.grid_size ---- */
 static void line_range(double L, double lambda_min, double lambda_max, double *k_lo, double *k_hi) {
     *k_lo = ceil(L / lambda_max);
     if (*k_lo < 1.0) *k_lo = 1.0; /* no mean (k = 0) line */
@@ -215,7 +215,7 @@ static int build_random(ModelInstance *m, TrackData *d) {
     return 0;
 }
 
-/* Cubic Hermite on [0, h] at t in [0, 1]: value and d/ds (as models.track._hermite). */
+/* Cubic Hermite on [0, h] at t in [0, 1]: value and d/ds (as railfmu.models.track.irregularity._hermite). */
 static void hermite(double t, double h, double y0, double m0, double y1, double m1,
                     double *value, double *slope) {
     const double t2 = t * t, t3 = t2 * t;
@@ -402,7 +402,7 @@ static void eval_profile(const TrackData *d, double s, double *v, double *dv) {
     }
 }
 
-/* ---- run-in: weight w and dw/ds at s for length > 0 (as models.track.run_in_weight) ---- */
+/* ---- run-in: weight w and dw/ds at s for length > 0 (as railfmu.models.track.irregularity.run_in_weight) ---- */
 static void run_in_weight(double s, double length, double *w, double *w_d) {
     if (s <= 0.0) {
         *w = *w_d = 0.0;

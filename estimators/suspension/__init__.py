@@ -1,0 +1,2 @@
+"""Vehicle suspension (Onat et al. 2016): the secondary vertical stiffness of a coach from its
+inertial signals."""
