@@ -27,10 +27,10 @@ from railfmu.estimators.train.driving_regimes import (
     recognise,
     regime_accuracy,
     reference_features,
-    score,
     theil_sen_at,
     true_regimes,
 )
+from railfmu.estimators.train.recognisers import score
 from railfmu.fmus.cosim import masters
 from railfmu.fmus.cosim.system import Component, Connection, System
 from railfmu.models.train.longitudinal import (

@@ -89,8 +89,8 @@ def test_standard_run_end_to_end(standard):
     # values (Table 1 sigmas, Q = 0), so its resistance error is the run's scatter
     assert e["speed_rmse_kmh"] < 1.0 and e["position_rmse_m"] < 8.0
     assert e["resistance_rel_error"] < 0.3 and 0 < e["seconds"] < 5
-    # regimes and features: the study's wiring equals railfmu.estimators.train.driving_regimes.score on the CSVs
-    from railfmu.estimators.train.driving_regimes import score
+    # regimes and features: the study's wiring equals railfmu.estimators.train.recognisers.score on the CSVs
+    from railfmu.estimators.train.recognisers import score
 
     every = np.flatnonzero(sig["gnss.valid"] == 1)
     style = {k: sig[f"driver.{k}"][0] for k in ("cruise_target", "traction_fraction",

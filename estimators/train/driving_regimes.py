@@ -396,21 +396,3 @@ def feature_errors(feats: Mapping, truth: Mapping) -> dict:
             "max_effort_rel_error": rel("max_effort_specific"),
             "cruise_speed_error_kmh": abs(feats["cruise_speed"] - truth["cruise_speed"]) / KMH,
             "brake_rate_error": [none(e - b) for e, b in zip(feats["brake_rates"], truth["brake_rates"])]}
-
-
-def score(fix_time, speed, acceleration, effort, time, true_speed, true_effort, style: Mapping,
-          train: Mapping, recogniser_name: str = "paper") -> tuple[dict, dict]:
-    """One estimator on one simulated run, as the study records it: ``(metrics, features)``.
-
-    ``fix_time``, ``speed``, ``acceleration``, ``effort``: the estimator's outputs at the GNSS
-    fixes (rows where the receiver's ``valid`` is set; effort and acceleration of the interval
-    ending at each fix). ``time``, ``true_speed``, ``true_effort``: the driver's grid as the
-    Jacobi master records it (``train.v``, ``train.effort_specific``). ``style``, ``train``:
-    as :func:`feature_truth`; ``recogniser_name`` the estimator's recogniser (:func:`recogniser`).
-    ``metrics`` holds ``regime_accuracy`` and the :func:`feature_errors`; ``features`` is
-    :func:`features`' dict."""
-    rec = recogniser(recogniser_name)(fix_time, speed, acceleration, effort)
-    truth = feature_truth(style, train)
-    feats = features(fix_time, speed, acceleration, effort, rec, truth["mass_effective"])
-    accuracy = regime_accuracy(rec, true_regimes(time, true_speed, true_effort), fix_time, time)
-    return {"regime_accuracy": accuracy, **feature_errors(feats, truth)}, feats

@@ -437,7 +437,7 @@ class ImprovedEstimator(Observer):
     ``recognition_window`` (s), ``min_coast`` (s), ``min_speed`` (m/s), ``test_sigmas``
     (-), ``r_random_walk`` (1/sqrt(s)), ``line_file``, ``rotating_mass_factor``;
     ``regime_recogniser`` (how a study reads its regimes, ``"hmm"`` unless set: the class
-    attribute of that name, :func:`railfmu.estimators.train.driving_regimes.recogniser`).
+    attribute of that name, :func:`railfmu.estimators.train.recognisers.recogniser`).
     """
 
     measurements: ClassVar[tuple[str, ...]] = PaperUKF.measurements

@@ -141,14 +141,15 @@ def regime_recognisers(system) -> dict[str, str]:
 
 def regime_scores(run: RunData, name: str, fixes: np.ndarray) -> tuple[dict, dict]:
     """One estimator's driving regimes and features (Cunillera et al. (2022) §3.2-3.3, by
-    :func:`railfmu.estimators.train.driving_regimes.score` with the estimator's recogniser,
+    :func:`railfmu.estimators.train.recognisers.score` with the estimator's recogniser,
     :func:`regime_recognisers`) at the GNSS fix rows ``fixes``: the issue's
     ``regime_accuracy``, ``max_power_rel_error``, ``max_effort_rel_error``,
     ``cruise_speed_error_kmh``, ``brake_rate_error`` (five, per ATB-EG step, None where the
     run has no braking fix there; also as ``brake_rate_error_step`` by step for the study's
     summary), the recognised regimes' ``regime_share`` of the running time and the
     ``features``; and the features' dict with its samples (the figures')."""
-    from railfmu.estimators.train.driving_regimes import REGIME_NAMES, score
+    from railfmu.estimators.train.driving_regimes import REGIME_NAMES
+    from railfmu.estimators.train.recognisers import score
 
     sig, est, roles = run.signals, run.estimates, run.roles
     t = np.asarray(est["time"])[fixes]
