@@ -77,6 +77,7 @@ from fmpy.model_description import (
 )
 
 from railfmu.models.errors import UserError
+from railfmu.fmus.cache import cache_root
 from railfmu.fmus.cosim.slave import Slave
 from railfmu.fmus.cosim.system import System, check_system, recorded_signals
 
@@ -289,7 +290,7 @@ def cached_container_dir(system: System) -> Path:
     h.update(repr((system.name, system.record, system.start_time, system.stop_time, system.step_size)).encode())
     h.update(repr((fmpy.__version__, _host_platform())).encode())
     h.update(Path(__file__).read_bytes())
-    root = _cache_dir() / "containers"
+    root = cache_root() / "containers"
     target = root / h.hexdigest()[:20]
     if not target.is_dir():
         root.mkdir(parents=True, exist_ok=True)
@@ -369,11 +370,6 @@ class ContainerSlave(Slave):
 _driver = None  # the loaded library, False when it cannot be built
 
 
-def _cache_dir() -> Path:
-    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
-    return Path(base) / "railfmu"
-
-
 def load_driver():
     """``railfmu_run_steps`` from the compiled driver (built once per source version), or
     ``None`` when no C compiler works (the master then steps through ctypes)."""
@@ -384,7 +380,7 @@ def load_driver():
     cmd = [cc, "-std=c99", "-O2", "-Wall", "-Wextra", "-Werror", "-shared", "-fPIC"]
     src = DRIVER_SOURCE.read_bytes()
     key = hashlib.sha256(src + " ".join(cmd).encode()).hexdigest()[:16]
-    lib = _cache_dir() / f"container_driver-{key}.so"
+    lib = cache_root() / f"container_driver-{key}.so"
     try:
         if not lib.is_file():
             lib.parent.mkdir(parents=True, exist_ok=True)

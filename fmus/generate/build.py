@@ -20,6 +20,7 @@ import zipfile
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
+from railfmu.fmus.cache import cache_root
 from railfmu.models.base import Model
 
 from railfmu.fmus.generate import codegen
@@ -95,16 +96,6 @@ def sources_key() -> str:
         h.update(f.relative_to(FMUS.parent).as_posix().encode())
         h.update(f.read_bytes())
     return h.hexdigest()
-
-
-def cache_root() -> Path:
-    """The per-user cache: ``$RAILFMU_CACHE``, else ``$XDG_CACHE_HOME/railfmu``, else
-    ``~/.cache/railfmu``. Never inside the installed package (read-only on a shared install,
-    and not in pip's install record)."""
-    if os.environ.get("RAILFMU_CACHE"):
-        return Path(os.environ["RAILFMU_CACHE"]).expanduser()
-    base = os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache"
-    return Path(base).expanduser() / "railfmu"
 
 
 def default_out() -> Path:
