@@ -70,3 +70,12 @@ def test_relative_links_resolve(page):
 def test_no_issue_numbers(page):
     hits = re.findall(r".{0,30}issue\s*#?\s*[0-9].{0,30}", page.read_text(encoding="utf-8"), flags=re.I)
     assert not hits, f"{page.relative_to(ROOT)}: {hits}"
+
+
+@pytest.mark.parametrize("page", PAGES, ids=lambda p: str(p.relative_to(ROOT)))
+def test_source_paths_exist(page):
+    """A module the docs name by path (`models/vehicle/wheelset.py`) is where they say."""
+    paths = re.findall(r"`((?:models|estimators|fmus|experiments|benchmarks|tests)/[\w/]+\.py)`",
+                       page.read_text(encoding="utf-8"))
+    missing = sorted({p for p in paths if not (ROOT / p).is_file()})
+    assert not missing, f"{page.relative_to(ROOT)}: {missing}"
