@@ -142,7 +142,7 @@ def regime_recognisers(system) -> dict[str, str]:
 def regime_scores(run: RunData, name: str, fixes: np.ndarray) -> tuple[dict, dict]:
     """One estimator's driving regimes and features (Cunillera et al. (2022) §3.2-3.3, by
     :func:`railfmu.estimators.train.recognisers.score` with the estimator's recogniser,
-    :func:`regime_recognisers`) at the GNSS fix rows ``fixes``: the issue's
+    :func:`regime_recognisers`) at the GNSS fix rows ``fixes``: the study's
     ``regime_accuracy``, ``max_power_rel_error``, ``max_effort_rel_error``,
     ``cruise_speed_error_kmh``, ``brake_rate_error`` (five, per ATB-EG step, None where the
     run has no braking fix there; also as ``brake_rate_error_step`` by step for the study's

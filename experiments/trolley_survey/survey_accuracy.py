@@ -8,7 +8,7 @@ Per run (:func:`chord_metrics`), from the offline observer ``smoother``
   at the samples of the survey's chord grid (:func:`railfmu.estimators.inertial.chord_accuracy.chord_grid` on the
   trolley's true ``distance``: 0.5 m spacing, consecutive 30 m chords, 5 m offset);
 * the chord errors of every surveyed point, exact (:func:`railfmu.estimators.inertial.chord_accuracy.chord_errors`
-  with the trolley's true n0 positions), the max ``|error|`` over the run (the issue's
+  with the trolley's true n0 positions), the max ``|error|`` over the run (the survey's
   statistic) and the rms: ``chord_alignment_max_error_mm``, ``chord_level_max_error_mm``,
   ``chord_alignment_rms_error_mm``, ``chord_level_rms_error_mm``;
 * the prediction of that statistic from the smoother's joint Gaussian of the errors:
@@ -24,7 +24,7 @@ Over a Monte Carlo (``railfmu study ... --runs N``) two statistics of the same c
 side by side (:func:`montecarlo_rows`):
 
 * the **RMS of the max**: per run the largest ``|error|`` over the chord points, then the RMS
-  over the runs (``chord_*_max_error_mm``'s ``rms``; the issue's metric), beside the mean of the
+  over the runs (``chord_*_max_error_mm``'s ``rms``; the survey's figure of merit), beside the mean of the
   per-run predictions ``predicted_sigma_*_mm``;
 * the **peak RMS** (:func:`pooled_peak_rms`): at every chord point the RMS over the runs of the
   chord error (the pointwise sigma), then the largest over the points
@@ -323,7 +323,7 @@ def montecarlo_rows(summary: dict[str, dict]) -> list[str]:
             "predicted peak σ [mm] | predicted / MC | paper (Fig. 12) [mm] |",
             "|---|---|---|---|---|---|---|---|---|", *rows, "",
             "Two statistics of the same 30 m chord errors. **RMS of max**: per run the largest |chord error| "
-            "over the chord points, then the RMS over the runs (`chord_*_max_error_mm`, the issue's metric); "
+            "over the chord points, then the RMS over the runs (`chord_*_max_error_mm`, the survey's figure of merit); "
             "predicted: the mean over runs of each run's prediction from the smoother's joint covariance "
             f"({PREDICTION_SAMPLES} draws per run). **Peak RMS**: at each chord point the RMS over the runs of "
             "the chord error (the pointwise σ), then the largest over the points "
