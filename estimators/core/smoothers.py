@@ -14,7 +14,7 @@ RTS (Rauch, Tung & Striebel, AIAA J. 3 (1965) 1445), from ``x_{N-1|N} = x^+_{N-1
     P_{k|N}   = P^+_k + C_k (P_{k+1|N} - P^-_{k+1}) C_k^T
 
 Ours because filterpy's ``rts_smoother`` pairs ``P^+_k`` with ``F_{k+1}`` instead of
-``F_k`` (its issue #278): right only for a constant ``F``. ``(P^-)^-1`` is applied through
+``F_k`` (a known filterpy bug): right only for a constant ``F``. ``(P^-)^-1`` is applied through
 the Cholesky factor of the correlation matrix (:func:`spd_inverse`): a covariance whose
 diagonal spans ten decades has a far better conditioned correlation matrix.
 

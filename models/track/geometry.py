@@ -138,7 +138,7 @@ and the irregularity at ``s`` (eq. 1) is ``(d_s - d_{s+5}) - (dbar_s - dbar_{s+5
 of the true (or measured) points against their own chord and ``dbar`` of the design
 points against the design chord. :func:`vector_distance`, :func:`chord_irregularity` and
 :meth:`TrackGeometry.true_chord_irregularity` (true rail minus design) implement it;
-issue 14's study calls them with estimated positions too.
+the trolley survey study calls them with estimated positions too.
 
 The same arithmetic is in ``fmus/native/models/TrackGeometry.h`` (the Trolley FMU);
 ``tests/test_track_geometry.py`` checks closed forms, ``tests/test_trolley.py`` C = Python.
