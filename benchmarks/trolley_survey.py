@@ -40,7 +40,7 @@ import numpy as np  # noqa: E402
 from railfmu.estimators.inertial.ins_observer import StrapdownINS  # noqa: E402
 from railfmu.experiments.trolley_survey import INCREMENTS, NAV, navigation_errors  # noqa: E402
 
-BAR_S = 10.0  # issue 13: simulated and processed by the INS in <= 10 s wall
+BAR_S = 10.0  # the goal: simulated and processed by the INS in <= 10 s wall
 
 
 def simulate(variant: str, step: float | None):

@@ -234,7 +234,7 @@ def test_rts_and_mbf_equal_the_batch_smoother_on_a_time_varying_system():
         assert np.abs(P - P_b).max() < 1e-10 * np.abs(P_b).max()
     assert np.abs(x_r - x_m).max() < 1e-12 * np.abs(x_b).max()
     assert np.array_equal(x_r[-1], p["xf"][-1])  # nothing after the last sample
-    # filterpy's rts_smoother pairs P^+_k with F_{k+1} (its issue #278): off on this system
+    # filterpy's rts_smoother pairs P^+_k with F_{k+1}: off on this system
     kf = KalmanFilter(dim_x=3, dim_z=2)
     x_f = kf.rts_smoother(p["xf"], p["Pf"], Fs=[*p["F"], p["F"][-1]], Qs=[*p["Q"], p["Q"][-1]])[0]
     assert np.abs(x_f - x_b).max() > 1e-3 * np.abs(x_b).max()

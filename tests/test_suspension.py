@@ -1,4 +1,4 @@
-"""Secondary-stiffness estimation (Onat et al. (2016), issue 5) on data from the real FMUs:
+"""Secondary-stiffness estimation (Onat et al. (2016)) on data from the real FMUs:
 TrackIrregularity (ERRI B176 low level, seed 1, V = 20 m/s, bogie pivots at 0 and 19 m) ->
 CoachVertical, with StepSource -> coach.k1 (430 kN/m, or 215 kN/m from t = 20 s), 10 ms steps.
 

@@ -9,7 +9,7 @@ import sys
 
 import pytest
 
-TARGET_REL_ERROR = 0.02  # issue 5: improved, final relative error, every variant
+TARGET_REL_ERROR = 0.02  # the target of the study: improved, final relative error, every variant
 TARGET_CONVERGENCE_S = 20.0  # static
 TARGET_DETECTION_S = 5.0  # step_fault
 KEYS = {"k1_true_final", "k1_est_final", "rel_error_final", "convergence_time_s"}

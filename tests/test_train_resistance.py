@@ -262,7 +262,7 @@ def test_a_run_shorter_than_one_gnss_sample_is_a_clear_error(text, span, tmp_pat
 @pytest.mark.slow
 def test_the_67_run_study(tmp_path, fmu_dir):
     """`railfmu study train_resistance --variant standard --runs 67`: the paper's 67 runs in at
-    most 60 s on two workers (measured 25 s), and issue 12's targets on the medians: `improved`
+    most 60 s on two workers (measured 25 s), and the study's targets on the medians: `improved`
     resistance_rel_error <= 0.05 (measured 0.0043) and speed_rmse_kmh <= 1.0 (0.23);
     max_power_rel_error <= 0.05 (ukf_paper 0.018, improved 0.015). regime_accuracy >= 0.95
     for `improved`, read by its hidden Markov model over the run (estimators/regime_decoding.py):

@@ -447,7 +447,7 @@ def test_whole_run(tmp_path, fmu_dir):
     assert results[0.01]["ins_position_error_max_mm"] < 0.008
 
 
-# -- the aided survey: smoother, chords, variants, Monte Carlo (issue 14) --------------------------
+# -- the aided survey: smoother, chords, variants, Monte Carlo ------------------------------------
 
 PAPER = {"alignment": 0.99, "level": 0.70}  # Jiang et al. (2017), Fig. 12: RMS over 500 runs of the max (mm)
 
