@@ -14,7 +14,7 @@ import numpy as np
 from railfmu.experiments.engine.plots import _pyplot
 from railfmu.models.train.longitudinal import R0, R1, R2
 
-from railfmu.experiments.train_resistance import ATB_EG, KMH, REGIME_COLOURS, REGIMES, estimators_of
+from railfmu.experiments.train_resistance.scores import ATB_EG, KMH, REGIME_COLOURS, REGIMES, estimators_of
 
 COLOURS = ("C3", "C2", "C1", "C5")  # per estimator, in SSD order
 PUBLISHED = (R0, R1, R2)  # the estimators' default start: the 35 %-load mass-specific KISS values
@@ -89,7 +89,7 @@ def run_figures(run, out: Path) -> list[str]:
     # Fig. 6: regimes along the run: the truth on the driver's steps, each estimator's recognised ones at its fixes
     from railfmu.estimators.train.driving_regimes import true_regimes
 
-    from railfmu.experiments.train_resistance import regime_scores
+    from railfmu.experiments.train_resistance.scores import regime_scores
 
     panels = [("truth (the paper's definitions on the driver's 1 s steps)", t,
                true_regimes(t, sig[roles["v"]], sig[roles["effort"]]), sig[roles["v"]] / KMH)]

@@ -26,11 +26,11 @@ from pathlib import Path
 import numpy as np
 
 from railfmu.experiments.engine.study_protocol import RunData, Study, measurement, parameter
-from railfmu.experiments.train_resistance import (
+from railfmu.experiments.train_resistance.scores import (
     KMH,
-    _f,
-    _finite,
     estimators_of,
+    finite_or_none,
+    format_or_dash,
     regime_recognisers,
     resistance,
 )
@@ -57,12 +57,12 @@ def features_of(t: np.ndarray, est: dict, name: str, recogniser_name: str = "pap
     feats = features(t, v, a, f, regimes)
     dt = np.r_[0.0, np.diff(t)]
     running = float(dt[regimes != 0].sum()) or 1.0
-    return {"max_power_w_per_kg": _finite(feats["max_power_specific"]),
-            "max_effort_n_per_kg": _finite(feats["max_effort_specific"]),
-            "cruise_speed_kmh": _finite(feats["cruise_speed"] / KMH),
-            "final_coast_min": _finite(feats["final_coast_duration"] / 60.0),
-            "final_brake_s": _finite(feats["final_brake_duration"]),
-            "brake_rates": [_finite(x) for x in feats["brake_rates"]],
+    return {"max_power_w_per_kg": finite_or_none(feats["max_power_specific"]),
+            "max_effort_n_per_kg": finite_or_none(feats["max_effort_specific"]),
+            "cruise_speed_kmh": finite_or_none(feats["cruise_speed"] / KMH),
+            "final_coast_min": finite_or_none(feats["final_coast_duration"] / 60.0),
+            "final_brake_s": finite_or_none(feats["final_brake_duration"]),
+            "brake_rates": [finite_or_none(x) for x in feats["brake_rates"]],
             "regime_share": {REGIME_NAMES[c]: float(dt[regimes == c].sum() / running) for c in (1, 2, 3, 4)}}
 
 
@@ -146,9 +146,9 @@ class TrainResistanceMeasured(Study):
                   "|---|---|---|---|---|---|---|---|"]
             for n in with_features:
                 f = metrics[n]["features"]
-                L.append(f"| {n} | {_f(f['max_power_w_per_kg'], '.2f')} | {_f(f['max_effort_n_per_kg'], '.3f')} | "
-                         f"{_f(f['cruise_speed_kmh'], '.1f')} | {_f(f['final_coast_min'], '.2f')} | "
-                         f"{_f(f['final_brake_s'], '.0f')} | {', '.join(_f(x, '.3f') for x in f['brake_rates'])} | "
+                L.append(f"| {n} | {format_or_dash(f['max_power_w_per_kg'], '.2f')} | {format_or_dash(f['max_effort_n_per_kg'], '.3f')} | "
+                         f"{format_or_dash(f['cruise_speed_kmh'], '.1f')} | {format_or_dash(f['final_coast_min'], '.2f')} | "
+                         f"{format_or_dash(f['final_brake_s'], '.0f')} | {', '.join(format_or_dash(x, '.3f') for x in f['brake_rates'])} | "
                          f"{' / '.join(format(100 * x, '.1f') for x in f['regime_share'].values())} |")
         return "\n".join(L)
 
