@@ -16,7 +16,9 @@
 
 #include "CsvCell.h"
 #include "Earth.h"
+#include "erri_b176.h"
 #include "model.h"
+#include "rng.h"
 
 #define TG_PI 3.14159265358979323846
 #define TG_RAIL_BASE 1.5      /* m between the rail centres: roll = asin(cant / b) */
@@ -521,16 +523,9 @@ static void tg_point(const TrackGeom *G, double s, int position, TrackPoint *P) 
 
 /* ---- setup -------------------------------------------------------------------------------- */
 
-static uint64_t tg_splitmix64(uint64_t *state) {
-    uint64_t z = (*state += UINT64_C(0x9E3779B97F4A7C15));
-    z = (z ^ (z >> 30)) * UINT64_C(0xBF58476D1CE4E5B9);
-    z = (z ^ (z >> 27)) * UINT64_C(0x94D049BB133111EB);
-    return z ^ (z >> 31);
-}
-
 /* ERRI B176 (models/track.py): A Oc^2 / ((O^2 + Or^2)(O^2 + Oc^2)) */
 static double tg_psd(double A, double omega) {
-    const double oc = 0.8246, orr = 0.0206, o2 = omega * omega;
+    const double oc = ERRI_OMEGA_C, orr = ERRI_OMEGA_R, o2 = omega * omega;
     return A * oc * oc / ((o2 + orr * orr) * (o2 + oc * oc));
 }
 
@@ -544,7 +539,7 @@ static int tg_setup(ModelInstance *m, TrackGeom *G, double lat0, double lon0, do
                     int level, double scale, int nlines, double lmin, double lmax, int seed,
                     double harm_y, double harm_z, double harm_l, double wob_y, double wob_z,
                     double wob_l) {
-    static const double AA[3] = {0.0, 2.119e-7, 6.125e-7}, AV[3] = {0.0, 4.032e-7, 1.080e-6};
+    const double *const AA = ERRI_A_ALIGNMENT, *const AV = ERRI_A_VERTICAL;
     size_t i, j, n = 0;
     double *all;
     double C[3][3];
@@ -606,11 +601,11 @@ static int tg_setup(ModelInstance *m, TrackGeom *G, double lat0, double lon0, do
             G->az[i] = scale * sqrt(2.0 * tg_psd(AV[level], w) * (wb - wa));
         }
         for (i = 0; i < (size_t)G->nlines; i++) {
-            const double phi = 2.0 * TG_PI * ((double)(tg_splitmix64(&rng) >> 11) * 0x1.0p-53);
+            const double phi = 2.0 * TG_PI * rng_uniform(&rng);
             G->cpy[i] = cos(phi), G->spy[i] = sin(phi);
         }
         for (i = 0; i < (size_t)G->nlines; i++) {
-            const double phi = 2.0 * TG_PI * ((double)(tg_splitmix64(&rng) >> 11) * 0x1.0p-53);
+            const double phi = 2.0 * TG_PI * rng_uniform(&rng);
             G->cpz[i] = cos(phi), G->spz[i] = sin(phi);
         }
     }

@@ -23,17 +23,15 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "erri_b176.h"
 #include "model.h"
+#include "rng.h"
 
 #define N_WHEELSETS 4
 #define MAX_GRID_POINTS (1L << 22) /* 48 bytes per point: at most 192 MiB of tables */
 #define LINE_MAX_LEN 4096
 
 static const double PI = 3.14159265358979323846; /* == Python's math.pi */
-/* ERRI B176 (ORE B176 RP1) spectra, Omega in rad/m, A in m rad */
-static const double OMEGA_C = 0.8246, OMEGA_R = 0.0206, OMEGA_S = 0.438;
-static const double A_A[3] = {0.0, 2.119e-7, 6.125e-7}; /* by psd_level: none, low, high */
-static const double A_V[3] = {0.0, 4.032e-7, 1.080e-6};
 
 static const fmi2ValueReference VR_ALIGNMENT[N_WHEELSETS] = {
     VR_alignment_1, VR_alignment_2, VR_alignment_3, VR_alignment_4};
@@ -64,31 +62,19 @@ typedef struct {
     double *tab_s, *tab_y, *tab_dy;
 } TrackData;
 
-/* ---- SplitMix64 (Steele, Lea & Flood 2014), identical to railfmu.models.track.irregularity.SplitMix64 ---- */
-static uint64_t splitmix64_next(uint64_t *state) {
-    uint64_t z = (*state += UINT64_C(0x9E3779B97F4A7C15));
-    z = (z ^ (z >> 30)) * UINT64_C(0xBF58476D1CE4E5B9);
-    z = (z ^ (z >> 27)) * UINT64_C(0x94D049BB133111EB);
-    return z ^ (z >> 31);
-}
-
-static double splitmix64_uniform(uint64_t *state) {
-    return (double)(splitmix64_next(state) >> 11) * 0x1.0p-53;
-}
-
 /* ---- spectra (same operation order as models/track.py) ---- */
 static double psd_shape(double o2) {
-    return OMEGA_C * OMEGA_C / ((o2 + OMEGA_R * OMEGA_R) * (o2 + OMEGA_C * OMEGA_C));
+    return ERRI_OMEGA_C * ERRI_OMEGA_C / ((o2 + ERRI_OMEGA_R * ERRI_OMEGA_R) * (o2 + ERRI_OMEGA_C * ERRI_OMEGA_C));
 }
 
 static double psd_channel(int channel, int level, double omega, double b) {
     const double o2 = omega * omega;
     switch (channel) {
-    case 0: return A_A[level] * psd_shape(o2);
-    case 1: return A_V[level] * psd_shape(o2);
+    case 0: return ERRI_A_ALIGNMENT[level] * psd_shape(o2);
+    case 1: return ERRI_A_VERTICAL[level] * psd_shape(o2);
     default:
-        return (A_V[level] / (b * b)) * (OMEGA_C * OMEGA_C) * o2 /
-               ((o2 + OMEGA_R * OMEGA_R) * (o2 + OMEGA_C * OMEGA_C) * (o2 + OMEGA_S * OMEGA_S));
+        return (ERRI_A_VERTICAL[level] / (b * b)) * (ERRI_OMEGA_C * ERRI_OMEGA_C) * o2 /
+               ((o2 + ERRI_OMEGA_R * ERRI_OMEGA_R) * (o2 + ERRI_OMEGA_C * ERRI_OMEGA_C) * (o2 + ERRI_OMEGA_S * ERRI_OMEGA_S));
     }
 }
 
@@ -197,7 +183,7 @@ static int build_random(ModelInstance *m, TrackData *d) {
         for (k = (long)k_lo; k < (long)k_lo + n_lines; k++) {
             const double omega = (double)k * d_omega;
             const double a = scale * channel_scale[c] * sqrt(2.0 * psd_channel(c, level, omega, b) * d_omega);
-            const double phi = 2.0 * PI * splitmix64_uniform(&rng);
+            const double phi = 2.0 * PI * rng_uniform(&rng);
             const double xr = 0.5 * a * cos(phi), xi = 0.5 * a * sin(phi);
             z[2 * k] = xr * (1.0 - omega);       /* X + i (i Omega X) = X (1 - Omega) */
             z[2 * k + 1] = xi * (1.0 - omega);
