@@ -400,13 +400,20 @@ static int null_arg(ModelInstance *m, const char *function, const char *arg, con
 
 /* ---- start values ------------------------------------------------------------------- */
 
-static void free_strings(ModelInstance *m) {
 #if N_STRING > 0
+/* the N_STRING strings of an instance or a snapshot */
+static void free_string_array(char **s) {
     size_t k;
     for (k = 0; k < N_STRING; k++) {
-        free(m->s[k]);
-        m->s[k] = NULL;
+        free(s[k]);
+        s[k] = NULL;
     }
+}
+#endif
+
+static void free_strings(ModelInstance *m) {
+#if N_STRING > 0
+    free_string_array(m->s);
 #else
     (void)m;
 #endif
@@ -942,11 +949,7 @@ fmi2Status fmi2SetString(fmi2Component c, const fmi2ValueReference vr[], size_t 
 
 static void snapshot_free_strings(Snapshot *st) {
 #if N_STRING > 0
-    size_t k;
-    for (k = 0; k < N_STRING; k++) {
-        free(st->s[k]);
-        st->s[k] = NULL;
-    }
+    free_string_array(st->s);
 #else
     (void)st;
 #endif
