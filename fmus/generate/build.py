@@ -29,6 +29,7 @@ HERE = Path(__file__).resolve().parent
 FMUS = HERE.parent
 RUNTIME_DIR = FMUS / "native" / "runtime"
 CSRC_DIR = FMUS / "native" / "models"
+COMMON_DIR = FMUS / "native" / "common"  # C shared by several models: RNG, CSV tables, spectra
 PLATFORM = "linux64"
 CFLAGS = ["-std=c99", "-O2", "-fPIC", "-shared", "-fvisibility=hidden", "-Wall", "-Wextra", "-Werror"]
 FMI_HEADERS = ["fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h"]
@@ -45,6 +46,36 @@ def fmi_header_dir() -> Path:
     return Path(fmpy.__file__).parent / "c-code"
 
 
+_INCLUDE = re.compile(r'^[ \t]*#[ \t]*include[ \t]+"([^"]+)"', re.M)
+
+
+def _native_source(name: str) -> Path | None:
+    for d in (CSRC_DIR, COMMON_DIR):
+        if (d / name).is_file():
+            return d / name
+    return None
+
+
+def _add_includes(src: dict[str, str]) -> None:
+    """Adds what the sources #include "..." from fmus/native (recursively), and X.c beside
+    every included X.h, so sources/ rebuilds the FMU on its own and a model lists only its
+    own files."""
+    todo = list(src)
+    while todo:
+        for inc in _INCLUDE.findall(src[todo.pop()]):
+            if inc in src or inc == "model_config.h":  # model_config.h: generated last
+                continue
+            path = _native_source(inc)
+            if path is None:
+                raise BuildError(f'#include "{inc}" is in neither {CSRC_DIR} nor {COMMON_DIR}')
+            src[inc] = path.read_text()
+            todo.append(inc)
+            impl = path.with_suffix(".c")
+            if path.suffix == ".h" and impl.is_file() and impl.name not in src:
+                src[impl.name] = impl.read_text()
+                todo.append(impl.name)
+
+
 def generate_sources(model: Model) -> tuple[str, dict[str, str]]:
     """The GUID, and file name -> text of everything in the FMU's sources/."""
     src: dict[str, str] = {
@@ -58,10 +89,11 @@ def generate_sources(model: Model) -> tuple[str, dict[str, str]]:
         src[f"{model.identifier}_equations.c"] = codegen.equations_c(model)
     else:
         for name in model.c_sources:
-            path = CSRC_DIR / name
-            if not path.is_file():
-                raise BuildError(f"{model.identifier}: hand-written source {path} does not exist")
+            path = _native_source(name)
+            if path is None:
+                raise BuildError(f"{model.identifier}: hand-written source {CSRC_DIR / name} does not exist")
             src[name] = path.read_text()
+    _add_includes(src)
     guid = codegen.guid_of(model, src)
     src["model_config.h"] = codegen.model_config_h(model, guid)
     return guid, src
@@ -89,7 +121,7 @@ def sources_key() -> str:
     import fmpy
 
     h = hashlib.sha256(repr((CFLAGS, os.environ.get("CC", "gcc"), fmpy.__version__)).encode())
-    roots = [FMUS.parent / "models", RUNTIME_DIR, CSRC_DIR]
+    roots = [FMUS.parent / "models", RUNTIME_DIR, CSRC_DIR, COMMON_DIR]
     files = [f for r in roots for f in sorted(r.rglob("*")) if f.is_file() and "__pycache__" not in f.parts]
     files += [HERE / "codegen.py", HERE / "build.py", FMUS / "units.py"]
     for f in files:

@@ -12,6 +12,7 @@
 
 #include "LineProfile.h"
 #include "model.h"
+#include "rng.h"
 
 enum { WAIT, ACCELERATE, HOLD, CYCLE_TRACTION, CYCLE_COAST, COAST, BRAKE_LIMIT, BRAKE_STOP, STOPPED };
 static const int REGIME[] = {0, 1, 2, 1, 3, 3, 4, 4, 0};
@@ -20,18 +21,8 @@ static const int REGIME[] = {0, 1, 2, 1, 3, 3, 4, 4, 0};
 #define ANTICIPATION 2.0 /* s */
 #define CYCLE_BAND_LOW (5.0 * KMH)
 #define DWELL_TOLERANCE 1e-6 /* s */
-static const uint64_t GAMMA = UINT64_C(0x9E3779B97F4A7C15);
-
-static uint64_t mix64(uint64_t z) {
-    z = (z ^ (z >> 30)) * UINT64_C(0xBF58476D1CE4E5B9);
-    z = (z ^ (z >> 27)) * UINT64_C(0x94D049BB133111EB);
-    return z ^ (z >> 31);
-}
-
 /* the j-th uniform in [0, 1) of the seed: output j + 1 of SplitMix64(seed) */
-static double uniform(fmi2Integer seed, unsigned j) {
-    return (double)(mix64((uint64_t)(int64_t)seed + (uint64_t)(j + 1) * GAMMA) >> 11) * 0x1.0p-53;
-}
+static double uniform(fmi2Integer seed, unsigned j) { return rng_uniform_at((uint64_t)(int64_t)seed, j); }
 
 static void draw_style(ModelInstance *m) {
     const fmi2Integer seed = m->i[VRI_seed];

@@ -7,27 +7,10 @@
 #include <stdint.h>
 
 #include "model.h"
+#include "rng.h"
 
 #define MAX_SAMPLE 9007199254740992.0 /* 2^53 */
 
-static const double PI = 3.14159265358979323846;
-static const uint64_t GAMMA = UINT64_C(0x9E3779B97F4A7C15);
-
-/* as SensorNoise.c and railfmu.models.sources.sensors.noise (channel 1 of the seed's stream) */
-static uint64_t mix64(uint64_t z) {
-    z = (z ^ (z >> 30)) * UINT64_C(0xBF58476D1CE4E5B9);
-    z = (z ^ (z >> 27)) * UINT64_C(0x94D049BB133111EB);
-    return z ^ (z >> 31);
-}
-
-static double noise(uint64_t seed, unsigned channel, uint64_t k) {
-    const uint64_t c = mix64(seed + (uint64_t)channel * GAMMA);
-    const uint64_t n = 2 * k + 1;
-    const uint64_t z1 = mix64(c + n * GAMMA), z2 = mix64(c + (n + 1) * GAMMA);
-    const double u1 = (double)((z1 >> 11) + 1) * 0x1.0p-53;
-    const double u2 = (double)(z2 >> 11) * 0x1.0p-53;
-    return sqrt(-2.0 * log(u1)) * cos(2.0 * PI * u2);
-}
 
 int model_check_parameters(ModelInstance *m) {
     if (!(m->r[VR_sample_period] > 0) || !isfinite(m->r[VR_sample_period])) {
@@ -76,7 +59,7 @@ int model_outputs(ModelInstance *m) {
     m->i[VRI_sample] = (fmi2Integer)k;
     r[VR_position] = r[VR_s_true] + (r[VR_position_sigma] != 0
                                          ? r[VR_position_sigma] *
-                                               noise((uint64_t)(int64_t)m->i[VRI_seed], 1u, (uint64_t)k)
+                                               rng_normal((uint64_t)(int64_t)m->i[VRI_seed], 1u, (uint64_t)k)
                                          : 0.0);
     if (res > 0) kmh = res * floor(kmh / res + 0.5);
     r[VR_speed_kmh] = kmh;

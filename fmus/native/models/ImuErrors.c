@@ -14,13 +14,13 @@
 #include <stdlib.h>
 
 #include "model.h"
+#include "rng.h"
 
 #define MAX_SAMPLE 9007199254740992.0 /* 2^53: sample indices stay exact doubles */
 #define SERIES_BELOW 0.5
 #define SERIES_TERMS 30
 
 static const double PI = 3.14159265358979323846; /* == Python's math.pi */
-static const uint64_t GAMMA = UINT64_C(0x9E3779B97F4A7C15);
 static const double G0 = 9.80665;                   /* m/s2: the g of datasheets */
 static const double GM_SIGMA_PER_B = 1.0759975729152142; /* FLICKER_FLOOR / GM_ALLAN_PEAK */
 enum { STREAM_WHITE = 4096, STREAM_ETA = 4112, STREAM_ZETA = 4128, STREAM_CONST = 4144 };
@@ -70,23 +70,7 @@ typedef struct {
     double noise_si[2], tc[2]; /* per triad */
 } Constants;
 
-/* ---- the noise: railfmu.models.sources.sensors.noise for any stream (railfmu.models.inertial.imu_errors.gauss) ---- */
-
-static uint64_t mix64(uint64_t z) {
-    z = (z ^ (z >> 30)) * UINT64_C(0xBF58476D1CE4E5B9);
-    z = (z ^ (z >> 27)) * UINT64_C(0x94D049BB133111EB);
-    return z ^ (z >> 31);
-}
-
-static double gauss(uint64_t seed, unsigned stream, uint64_t k) {
-    const uint64_t c = mix64(seed + (uint64_t)stream * GAMMA);
-    const uint64_t n = 2 * k + 1;
-    const uint64_t z1 = mix64(c + n * GAMMA), z2 = mix64(c + (n + 1) * GAMMA);
-    const double u1 = (double)((z1 >> 11) + 1) * 0x1.0p-53; /* (0, 1]: log finite */
-    const double u2 = (double)(z2 >> 11) * 0x1.0p-53;       /* [0, 1) */
-    return sqrt(-2.0 * log(u1)) * cos(2.0 * PI * u2);
-}
-
+/* the noise: rng_normal, as railfmu.models.inertial.imu_errors.gauss */
 /* datasheet unit -> SI: (noise density, bias) of triad s */
 static double noise_si(int s) { return s == 0 ? PI / 180.0 / 60.0 : 1e-6 * G0; }
 static double bias_si(int s) { return s == 0 ? PI / 180.0 / 3600.0 : 1e-6 * G0; }
@@ -181,16 +165,16 @@ int model_initialize(ModelInstance *m) {
         for (i = 0; i < 3; i++) {
             const int a = 3 * s + i;
             const unsigned stream = STREAM_CONST + (unsigned)a + 1;
-            c->turn_on[a] = (r[T->on[i]] + r[T->on_sigma] * gauss(seed, stream, K_TURN_ON)) * bsi;
-            c->scale[a] = (r[T->sf[i]] + r[T->sf_sigma] * gauss(seed, stream, K_SCALE)) * 1e-6;
+            c->turn_on[a] = (r[T->on[i]] + r[T->on_sigma] * rng_normal(seed, stream, K_TURN_ON)) * bsi;
+            c->scale[a] = (r[T->sf[i]] + r[T->sf_sigma] * rng_normal(seed, stream, K_SCALE)) * 1e-6;
             for (j = 0; j < 3; j++) {
                 c->mis[a][j] = j == i ? 0.0
                                       : (r[T->mis[i][j]] +
-                                         r[T->mis_sigma] * gauss(seed, stream, (uint64_t)(K_MISALIGNMENT + j))) *
+                                         r[T->mis_sigma] * rng_normal(seed, stream, (uint64_t)(K_MISALIGNMENT + j))) *
                                             1e-6;
             }
             c->sigma_b[a] = sigma_b;
-            c->gm0[a] = sigma_b * gauss(seed, stream, K_GM0);
+            c->gm0[a] = sigma_b * rng_normal(seed, stream, K_GM0);
         }
     }
     m->modelData = c;
@@ -248,9 +232,9 @@ int model_outputs(ModelInstance *m) {
             if (h > 0) {
                 const double b = r[T->gm_before[i]];
                 double eta, integral;
-                const double w1 = c->sigma_b[a] != 0 ? gauss(seed, STREAM_ETA + ax, k) : 0.0;
-                const double w2 = c->sigma_b[a] != 0 ? gauss(seed, STREAM_ZETA + ax, k) : 0.0;
-                const double ws = c->noise_si[s] != 0 ? gauss(seed, STREAM_WHITE + ax, k) : 0.0;
+                const double w1 = c->sigma_b[a] != 0 ? rng_normal(seed, STREAM_ETA + ax, k) : 0.0;
+                const double w2 = c->sigma_b[a] != 0 ? rng_normal(seed, STREAM_ZETA + ax, k) : 0.0;
+                const double ws = c->noise_si[s] != 0 ? rng_normal(seed, STREAM_WHITE + ax, k) : 0.0;
                 eta = g.s_eta * w1;
                 integral = g.a * b + g.gain * eta + g.s_zeta * w2;
                 err = err + c->turn_on[a] * h + integral + s_white * ws;

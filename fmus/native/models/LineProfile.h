@@ -15,14 +15,11 @@
 #ifndef RAILFMU_LINE_PROFILE_H
 #define RAILFMU_LINE_PROFILE_H
 
-#include <errno.h>
-#include <locale.h>
 #include <math.h>
-#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
-#include "CsvCell.h"
+#include "csv_table.h"
 #include "model.h"
 
 #if defined(__GNUC__)
@@ -63,75 +60,60 @@ static double line_curve(double R) {
 
 /* Reads the file; NULL after one model_error naming the file, line and column. */
 static LineProfile *line_load(ModelInstance *m, const char *file) {
-    char *path = model_resolve_path(m, file), line[4096];
-    FILE *f;
+    CsvTable t;
     LineProfile *p;
-    size_t cap = 0, ncol = 3;
-    long lineno = 0;
+    size_t cap = 0, ncol = 3, j;
+    int rc;
     if (!*file) {
         model_error(m, "parameter line_file is empty: a line profile CSV (%s,%s,%s) is needed",
                     LINE_COLUMNS[0], LINE_COLUMNS[1], LINE_COLUMNS[2]);
-        free(path);
         return NULL;
     }
-    if (!path) {
-        model_error(m, "line_file %s: a relative path needs the FMU's resources folder (use an "
-                       "absolute path)", file);
-        return NULL;
-    }
-    f = fopen(path, "rb");
-    if (!f) {
-        model_error(m, "line_file %s: cannot open (%s)", path, strerror(errno));
-        free(path);
-        return NULL;
-    }
+    if (csv_open(&t, m, "line_file", file, CSV_SKIP_BOM)) return NULL;
     p = (LineProfile *)calloc(1, sizeof *p);
-    while (p && fgets(line, sizeof line, f)) {
-        char *fld[5], *s = line;
-        size_t nf, j;
-        double v[4] = {0, 0, 0, 0};
-        lineno++;
-        if (lineno == 1 && (unsigned char)s[0] == 0xEF && (unsigned char)s[1] == 0xBB &&
-            (unsigned char)s[2] == 0xBF)
-            s += 3;
-        s[strcspn(s, "\n")] = '\0';
-        if (*csv_trim(s) == '\0') continue;
-        nf = csv_split(s, fld, 5);
-        if (lineno == 1 && nf == 4) ncol = 4;
-        if (nf != ncol) {
-            model_error(m, "line_file %s, line %ld: %lu fields, expected %lu (%s,%s,%s[,%s])", path,
-                        lineno, (unsigned long)nf, (unsigned long)ncol, LINE_COLUMNS[0],
-                        LINE_COLUMNS[1], LINE_COLUMNS[2], LINE_COLUMNS[3]);
+    if (!p) {
+        csv_fail(&t, 0, 0, "out of memory");
+        goto fail;
+    }
+    if (t.ncol == 0) {
+        csv_fail(&t, 0, 0, "no data rows (header %s,%s,%s, then one row per change)", LINE_COLUMNS[0],
+                 LINE_COLUMNS[1], LINE_COLUMNS[2]);
+        goto fail;
+    }
+    if (t.ncol == 4) ncol = 4;
+    if (t.ncol != ncol) {
+        csv_fail(&t, 1, 0, "%lu fields, expected %lu (%s,%s,%s[,%s])", (unsigned long)t.ncol,
+                 (unsigned long)ncol, LINE_COLUMNS[0], LINE_COLUMNS[1], LINE_COLUMNS[2], LINE_COLUMNS[3]);
+        goto fail;
+    }
+    for (j = 0; j < ncol; j++)
+        if (strcmp(t.header[j], LINE_COLUMNS[j]) != 0) {
+            csv_fail(&t, 1, j + 1, "header '%s', expected '%s'", t.header[j], LINE_COLUMNS[j]);
             goto fail;
         }
-        if (lineno == 1) {
-            for (j = 0; j < ncol; j++)
-                if (strcmp(fld[j], LINE_COLUMNS[j]) != 0) {
-                    model_error(m, "line_file %s, line 1, column %lu: header '%s', expected '%s'", path,
-                                (unsigned long)j + 1, fld[j], LINE_COLUMNS[j]);
-                    goto fail;
-                }
-            continue;
+    while ((rc = csv_next_row(&t)) > 0) {
+        double v[4] = {0, 0, 0, 0};
+        if (t.ncell != ncol) {
+            csv_fail(&t, t.line, 0, "%lu fields, expected %lu (%s,%s,%s[,%s])", (unsigned long)t.ncell,
+                     (unsigned long)ncol, LINE_COLUMNS[0], LINE_COLUMNS[1], LINE_COLUMNS[2], LINE_COLUMNS[3]);
+            goto fail;
         }
         for (j = 0; j < ncol; j++)
-            if (csv_number(fld[j], &v[j])) {
-                model_error(m, "line_file %s, line %ld, column %lu (%s): '%s' is not a finite number",
-                            path, lineno, (unsigned long)j + 1, LINE_COLUMNS[j], fld[j]);
+            if (csv_number(t.cell[j], &v[j]) != CSV_OK) {
+                csv_fail(&t, t.line, j + 1, "'%s' is not a finite number", t.cell[j]);
                 goto fail;
             }
         if (p->n > 0 && !(v[0] > p->position[p->n - 1])) {
-            model_error(m, "line_file %s, line %ld, column 1 (position_m): %.17g does not increase "
-                           "on the previous row's %.17g", path, lineno, v[0], p->position[p->n - 1]);
+            csv_fail(&t, t.line, 1, "%.17g does not increase on the previous row's %.17g", v[0],
+                     p->position[p->n - 1]);
             goto fail;
         }
         if (ncol == 4 && v[3] != 0 && !(fabs(v[3]) > 55.0)) {
-            model_error(m, "line_file %s, line %ld, column 4 (curve_radius_m): %.17g must be 0 "
-                           "(straight) or beyond 55 m", path, lineno, v[3]);
+            csv_fail(&t, t.line, 4, "%.17g must be 0 (straight) or beyond 55 m", v[3]);
             goto fail;
         }
         if (!(v[2] > 0)) {
-            model_error(m, "line_file %s, line %ld, column 3 (speed_limit_kmh): %.17g must be > 0",
-                        path, lineno, v[2]);
+            csv_fail(&t, t.line, 3, "%.17g must be > 0", v[2]);
             goto fail;
         }
         if (p->n == cap) {
@@ -145,7 +127,7 @@ static LineProfile *line_load(ModelInstance *m, const char *file) {
             if (d) p->limit = d;
             if (d) e = (double *)realloc(p->curve, nc * sizeof *e);
             if (!e) {
-                model_error(m, "line_file %s: out of memory", path);
+                csv_fail(&t, 0, 0, "out of memory");
                 goto fail;
             }
             p->curve = e;
@@ -157,21 +139,16 @@ static LineProfile *line_load(ModelInstance *m, const char *file) {
         p->curve[p->n] = line_curve(v[3]);
         p->n++;
     }
-    if (!p) {
-        model_error(m, "line_file %s: out of memory", path);
+    if (rc < 0) goto fail;
+    if (p->n == 0) {
+        csv_fail(&t, 0, 0, "no data rows (header %s,%s,%s, then one row per change)", LINE_COLUMNS[0],
+                 LINE_COLUMNS[1], LINE_COLUMNS[2]);
         goto fail;
     }
-    if (lineno == 0 || p->n == 0) {
-        model_error(m, "line_file %s: no data rows (header %s,%s,%s, then one row per change)", path,
-                    LINE_COLUMNS[0], LINE_COLUMNS[1], LINE_COLUMNS[2]);
-        goto fail;
-    }
-    fclose(f);
-    free(path);
+    csv_close(&t);
     return p;
 fail:
-    fclose(f);
-    free(path);
+    csv_close(&t);
     line_free(p);
     return NULL;
 }

@@ -19,12 +19,11 @@
 #include <stdint.h>
 
 #include "model.h"
+#include "rng.h"
 
 #define N_CHANNELS 8
 #define MAX_SAMPLE 9007199254740992.0 /* 2^53: sample indices stay exact doubles */
 
-static const double PI = 3.14159265358979323846; /* == Python's math.pi */
-static const uint64_t GAMMA = UINT64_C(0x9E3779B97F4A7C15);
 
 static const fmi2ValueReference VR_U[N_CHANNELS] = {VR_u_1, VR_u_2, VR_u_3, VR_u_4,
                                                     VR_u_5, VR_u_6, VR_u_7, VR_u_8};
@@ -36,26 +35,6 @@ static const fmi2ValueReference VR_GAIN[N_CHANNELS] = {
     VR_gain_1, VR_gain_2, VR_gain_3, VR_gain_4, VR_gain_5, VR_gain_6, VR_gain_7, VR_gain_8};
 static const fmi2ValueReference VR_BIAS[N_CHANNELS] = {
     VR_bias_1, VR_bias_2, VR_bias_3, VR_bias_4, VR_bias_5, VR_bias_6, VR_bias_7, VR_bias_8};
-
-/* ---- the noise: identical to railfmu.models.sources.sensors.noise ---- */
-
-/* SplitMix64's output function (Steele, Lea & Flood 2014), as railfmu.models.track.irregularity.SplitMix64 */
-static uint64_t mix64(uint64_t z) {
-    z = (z ^ (z >> 30)) * UINT64_C(0xBF58476D1CE4E5B9);
-    z = (z ^ (z >> 27)) * UINT64_C(0x94D049BB133111EB);
-    return z ^ (z >> 31);
-}
-
-/* Standard Gaussian of channel (1..8) at sample k: outputs 2k+1 and 2k+2 of the SplitMix64
-   stream seeded with c = mix64(seed + channel G), then Box-Muller (cosine branch). */
-static double noise(uint64_t seed, unsigned channel, uint64_t k) {
-    const uint64_t c = mix64(seed + (uint64_t)channel * GAMMA);
-    const uint64_t n = 2 * k + 1;
-    const uint64_t z1 = mix64(c + n * GAMMA), z2 = mix64(c + (n + 1) * GAMMA);
-    const double u1 = (double)((z1 >> 11) + 1) * 0x1.0p-53; /* (0, 1]: log finite */
-    const double u2 = (double)(z2 >> 11) * 0x1.0p-53;       /* [0, 1) */
-    return sqrt(-2.0 * log(u1)) * cos(2.0 * PI * u2);
-}
 
 /* ---- model interface (model.h) ---- */
 
@@ -116,7 +95,7 @@ int model_outputs(ModelInstance *m) {
     seed = (uint64_t)(int64_t)m->i[VRI_seed]; /* two's complement, as the Python */
     for (j = 0; j < N_CHANNELS; j++) {
         const double sigma = r[VR_SIGMA[j]];
-        const double w = sigma != 0 ? noise(seed, (unsigned)(j + 1), k) : 0.0;
+        const double w = sigma != 0 ? rng_normal(seed, (uint64_t)(j + 1), k) : 0.0;
         r[VR_Y[j]] = r[VR_GAIN[j]] * r[VR_U[j]] + r[VR_BIAS[j]] + sigma * w;
     }
     return 0;

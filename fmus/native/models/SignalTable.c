@@ -6,14 +6,12 @@
  * one model_error naming the file, the line and the column; fmi2ExitInitializationMode then
  * fails with that message alone.
  */
-#include <errno.h>
-#include <limits.h>
-#include <locale.h>
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
+#include "csv_table.h"
 #include "model.h"
 
 #define TIME_TOLERANCE 1e-9 /* relative, with max(1, |tau|) */
@@ -51,115 +49,7 @@ static void free_table(Table *d) {
     free(d);
 }
 
-/* ---- parsing ---- */
-
-static char *trim(char *s) {
-    char *e;
-    while (*s == ' ' || *s == '\t') s++;
-    e = s + strlen(s);
-    while (e > s && (e[-1] == ' ' || e[-1] == '\t' || e[-1] == '\r')) *--e = '\0';
-    return s;
-}
-
-/* Splits line at commas in place; fields[] gets up to max pointers. Returns the count. */
-static size_t split(char *line, char **fields, size_t max) {
-    size_t n = 0;
-    char *p = line;
-    for (;;) {
-        char *comma = strchr(p, ',');
-        if (comma) *comma = '\0';
-        if (n < max) fields[n] = trim(p);
-        n++;
-        if (!comma) return n;
-        p = comma + 1;
-    }
-}
-
-/* A decimal number as C's strtod reads it in the "C" locale (an importer may have set
-   another one: then '.' becomes its decimal point first). 0 = ok, 1 = not a number,
-   2 = not finite. */
-static int parse_double(const char *f, double *x) {
-    char buf[128];
-    const char *s = f;
-    char *end;
-    const char dp = localeconv()->decimal_point[0];
-    if (!*f) return 1;
-    if (dp != '.' && strlen(f) < sizeof buf) {
-        char *q;
-        strcpy(buf, f);
-        for (q = buf; *q; q++)
-            if (*q == '.') *q = dp;
-        s = buf;
-    }
-    errno = 0;
-    *x = strtod(s, &end);
-    if (end == s || *end != '\0') return 1;
-    if (!isfinite(*x)) return 2;
-    return 0;
-}
-
-static int parse_integer(const char *f, fmi2Integer *v) {
-    char *end;
-    long x;
-    if (!*f) return 1;
-    errno = 0;
-    x = strtol(f, &end, 10);
-    if (end == f || *end != '\0' || errno == ERANGE || x < INT_MIN || x > INT_MAX) return 1;
-    *v = (fmi2Integer)x;
-    return 0;
-}
-
-/* The whole file in one NUL-terminated buffer (tables are read once; 20,000 rows of a few
-   columns are a few hundred kB). */
-static char *read_file(ModelInstance *m, const char *path) {
-    FILE *f = fopen(path, "rb");
-    char *buf = NULL;
-    size_t cap = 0, len = 0;
-    if (!f) {
-        model_error(m, "file %s: cannot open (%s)", path, strerror(errno));
-        return NULL;
-    }
-    for (;;) {
-        size_t got;
-        if (cap - len < 65536) {
-            char *nb = (char *)realloc(buf, cap ? 2 * cap : 65536 + 1);
-            if (!nb) {
-                model_error(m, "file %s: out of memory", path);
-                free(buf);
-                fclose(f);
-                return NULL;
-            }
-            buf = nb;
-            cap = cap ? 2 * cap : 65536 + 1;
-        }
-        got = fread(buf + len, 1, cap - len - 1, f);
-        len += got;
-        if (got == 0) break;
-    }
-    if (ferror(f)) {
-        model_error(m, "file %s: read error", path);
-        free(buf);
-        fclose(f);
-        return NULL;
-    }
-    fclose(f);
-    buf[len] = '\0';
-    return buf;
-}
-
-/* Next line (without '\n') from *p, or NULL at the end; advances *p. */
-static char *next_line(char **p) {
-    char *line = *p, *nl;
-    if (!*line) return NULL;
-    nl = strchr(line, '\n');
-    if (nl) {
-        *nl = '\0';
-        *p = nl + 1;
-    } else {
-        *p = line + strlen(line);
-    }
-    return line;
-}
+/* ---- parsing (csv_table.h) ---- */
 
 static const char *param_string(const ModelInstance *m, size_t vr) {
     return m->s[vr] ? m->s[vr] : "";
@@ -167,8 +57,9 @@ static const char *param_string(const ModelInstance *m, size_t vr) {
 
 /* Column index of a bound name in the header, or -1 after logging which parameter named a
    missing column. */
-static int find_column(ModelInstance *m, const char *path, char **header, size_t nh,
-                       const char *name, const char *param) {
+static int find_column(const CsvTable *t, const char *name, const char *param) {
+    char **header = t->header;
+    const size_t nh = t->ncol;
     size_t j;
     for (j = 1; j < nh; j++)
         if (strcmp(header[j], name) == 0) return (int)j;
@@ -185,8 +76,7 @@ static int find_column(ModelInstance *m, const char *path, char **header, size_t
                 break;
             }
         }
-        model_error(m, "file %s, line 1: no column '%s' (named by parameter %s); the header has: %s",
-                    path, name, param, list);
+        csv_fail(t, 1, 0, "no column '%s' (named by parameter %s); the header has: %s", name, param, list);
     }
     return -1;
 }
@@ -199,32 +89,22 @@ typedef struct {
     size_t slot; /* index in the row of its type */
 } Binding;
 
-static int load(ModelInstance *m, Table *d, const char *path) {
-    char *text = read_file(m, path), *p, *line;
-    char **fields = NULL, **header = NULL;
+static int load(ModelInstance *m, Table *d, const char *file) {
+    CsvTable t;
+    char **header;
     Binding bind[N_REAL_CHANNELS + N_BOOLEAN_CHANNELS + N_INTEGER_CHANNELS];
     size_t nh, nbind = 0, cap = 0, k, j;
-    long lineno = 1;
-    int ok = -1;
+    int ok = -1, rc;
 
-    if (!text) return -1;
-    fields = (char **)malloc(MAX_FIELDS * sizeof *fields);
-    header = (char **)malloc(MAX_FIELDS * sizeof *header);
-    if (!fields || !header) {
-        model_error(m, "file %s: out of memory", path);
+    if (csv_open(&t, m, "file", file, CSV_SKIP_BOM)) return -1;
+    header = t.header;
+    nh = t.ncol;
+    if (nh == 0) {
+        csv_fail(&t, 1, 0, "empty file (expected a header line starting with 'time')");
         goto done;
     }
-    p = text;
-    if ((unsigned char)p[0] == 0xEF && (unsigned char)p[1] == 0xBB && (unsigned char)p[2] == 0xBF)
-        p += 3; /* UTF-8 byte order mark (spreadsheet exports) */
-    line = next_line(&p);
-    if (!line) {
-        model_error(m, "file %s, line 1: empty file (expected a header line starting with 'time')", path);
-        goto done;
-    }
-    nh = split(line, header, MAX_FIELDS);
     if (nh > MAX_FIELDS) {
-        model_error(m, "file %s, line 1: more than %d columns", path, MAX_FIELDS);
+        csv_fail(&t, 1, 0, "more than %d columns", MAX_FIELDS);
         goto done;
     }
     for (j = 0; j < nh; j++) { /* "name" -> name */
@@ -236,15 +116,13 @@ static int load(ModelInstance *m, Table *d, const char *path) {
     }
     /* "time_s": the trolley survey's standard imu.csv and truth.csv */
     if (strcmp(header[0], "time") != 0 && strcmp(header[0], "time_s") != 0) {
-        model_error(m, "file %s, line 1, column 1: the first column must be 'time' or 'time_s' (s), not '%s'",
-                    path, header[0]);
+        csv_fail(&t, 1, 1, "the first column must be 'time' or 'time_s' (s), not '%s'", header[0]);
         goto done;
     }
     for (j = 1; j < nh; j++) {
         for (k = 0; k < j; k++) {
             if (strcmp(header[j], header[k]) == 0) {
-                model_error(m, "file %s, line 1, column %lu: column name '%s' repeats column %lu",
-                            path, (unsigned long)j + 1, header[j], (unsigned long)k + 1);
+                csv_fail(&t, 1, j + 1, "column name '%s' repeats column %lu", header[j], (unsigned long)k + 1);
                 goto done;
             }
         }
@@ -259,7 +137,7 @@ static int load(ModelInstance *m, Table *d, const char *path) {
         const char *name = param_string(m, vr);
         int col;
         if (!*name) continue;
-        col = find_column(m, path, header, nh, name, model_string_info[vr].name);
+        col = find_column(&t, name, model_string_info[vr].name);
         if (col < 0) goto done;
         bind[nbind].column = col;
         bind[nbind].kind = kind;
@@ -276,16 +154,13 @@ static int load(ModelInstance *m, Table *d, const char *path) {
         nbind++;
     }
 
-    while ((line = next_line(&p)) != NULL) {
-        size_t nf;
+    while ((rc = csv_next_row(&t)) > 0) {
+        char **fields = t.cell;
+        const long lineno = t.line;
         double tk;
-        int rc;
-        lineno++;
-        if (*trim(line) == '\0') continue; /* blank lines (a trailing newline or two) */
-        nf = split(line, fields, MAX_FIELDS);
-        if (nf != nh) {
-            model_error(m, "file %s, line %ld: %lu fields, but the header has %lu columns", path,
-                        lineno, (unsigned long)nf, (unsigned long)nh);
+        if (t.ncell != nh) {
+            csv_fail(&t, lineno, 0, "%lu fields, but the header has %lu columns", (unsigned long)t.ncell,
+                     (unsigned long)nh);
             goto done;
         }
         if (d->n == cap) {
@@ -300,57 +175,51 @@ static int load(ModelInstance *m, Table *d, const char *path) {
             if (nb) d->b = nb;
             if (nb) ni = (fmi2Integer *)realloc(d->i, nc * (d->ni ? d->ni : 1) * sizeof *ni);
             if (!ni) {
-                model_error(m, "file %s, line %ld: out of memory", path, lineno);
+                csv_fail(&t, lineno, 0, "out of memory");
                 goto done;
             }
             d->i = ni;
             cap = nc;
         }
-        rc = parse_double(fields[0], &tk);
+        rc = csv_number(fields[0], &tk);
         if (rc) {
-            model_error(m, "file %s, line %ld, column 1 (time): '%s' is not a %snumber", path,
-                        lineno, fields[0], rc == 2 ? "finite " : "");
+            csv_fail(&t, lineno, 1, "'%s' is not a %snumber", fields[0], rc == CSV_NOT_FINITE ? "finite " : "");
             goto done;
         }
         if (d->n > 0 && !(tk > d->time[d->n - 1])) {
-            model_error(m, "file %s, line %ld, column 1 (time): %.17g %s the previous row's time "
-                           "%.17g (times must increase strictly)",
-                        path, lineno, tk, tk == d->time[d->n - 1] ? "repeats" : "is before",
-                        d->time[d->n - 1]);
+            csv_fail(&t, lineno, 1, "%.17g %s the previous row's time %.17g (times must increase strictly)",
+                     tk, tk == d->time[d->n - 1] ? "repeats" : "is before", d->time[d->n - 1]);
             goto done;
         }
         d->time[d->n] = tk;
         for (j = 0; j < nbind; j++) {
             const char *f = fields[bind[j].column];
-            const char *cname = header[bind[j].column];
-            const unsigned long cno = (unsigned long)bind[j].column + 1;
+            const size_t cno = (size_t)bind[j].column + 1;
             if (bind[j].kind == 0) {
-                rc = parse_double(f, &d->y[d->n * d->nr + bind[j].slot]);
+                rc = csv_number(f, &d->y[d->n * d->nr + bind[j].slot]);
                 if (rc) {
-                    model_error(m, "file %s, line %ld, column %lu (%s): '%s' is not a %snumber", path,
-                                lineno, cno, cname, f, rc == 2 ? "finite " : "");
+                    csv_fail(&t, lineno, cno, "'%s' is not a %snumber", f, rc == CSV_NOT_FINITE ? "finite " : "");
                     goto done;
                 }
             } else if (bind[j].kind == 1) {
                 double v;
-                if (parse_double(f, &v) || (v != 0.0 && v != 1.0)) {
-                    model_error(m, "file %s, line %ld, column %lu (%s): '%s' is not 0 or 1", path,
-                                lineno, cno, cname, f);
+                if (csv_number(f, &v) || (v != 0.0 && v != 1.0)) {
+                    csv_fail(&t, lineno, cno, "'%s' is not 0 or 1", f);
                     goto done;
                 }
                 d->b[d->n * d->nb + bind[j].slot] = v != 0.0 ? fmi2True : fmi2False;
             } else {
-                if (parse_integer(f, &d->i[d->n * d->ni + bind[j].slot])) {
-                    model_error(m, "file %s, line %ld, column %lu (%s): '%s' is not an integer", path,
-                                lineno, cno, cname, f);
+                if (csv_integer(f, &d->i[d->n * d->ni + bind[j].slot])) {
+                    csv_fail(&t, lineno, cno, "'%s' is not an integer", f);
                     goto done;
                 }
             }
         }
         d->n++;
     }
+    if (rc < 0) goto done;
     if (d->n == 0) {
-        model_error(m, "file %s, line 2: no data rows after the header", path);
+        csv_fail(&t, 2, 0, "no data rows after the header");
         goto done;
     }
     d->min_gap = HUGE_VAL;
@@ -358,9 +227,7 @@ static int load(ModelInstance *m, Table *d, const char *path) {
         if (d->time[k] - d->time[k - 1] < d->min_gap) d->min_gap = d->time[k] - d->time[k - 1];
     ok = 0;
 done:
-    free(fields);
-    free(header);
-    free(text);
+    csv_close(&t);
     return ok;
 }
 
@@ -414,7 +281,6 @@ static int build_table(ModelInstance *m) {
     const char *file = param_string(m, VRS_file);
     Table *d;
     size_t k;
-    char *path;
     model_free(m);
     if (!*file) return 0; /* no table: every channel 0 */
     d = (Table *)calloc(1, sizeof *d);
@@ -425,19 +291,10 @@ static int build_table(ModelInstance *m) {
     for (k = 0; k < N_REAL_CHANNELS; k++) d->real_slot[k] = -1;
     for (k = 0; k < N_BOOLEAN_CHANNELS; k++) d->bool_slot[k] = -1;
     for (k = 0; k < N_INTEGER_CHANNELS; k++) d->int_slot[k] = -1;
-    path = model_resolve_path(m, file);
-    if (!path) {
-        model_error(m, "file %s: a relative path needs the FMU's resources folder, which the "
-                       "importer did not give (use an absolute path)", file);
+    if (load(m, d, file) != 0) {
         free_table(d);
         return 1;
     }
-    if (load(m, d, path) != 0) {
-        free(path);
-        free_table(d);
-        return 1;
-    }
-    free(path);
     m->modelData = d;
     return 0;
 }

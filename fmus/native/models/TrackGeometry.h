@@ -6,17 +6,17 @@
 #ifndef RAILFMU_TRACK_GEOMETRY_H
 #define RAILFMU_TRACK_GEOMETRY_H
 
-#include <errno.h>
-#include <locale.h>
 #include <math.h>
 #include <stdint.h>
-#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
-#include "CsvCell.h"
 #include "Earth.h"
+#include "ProfileTable.h"
+#include "csv_table.h"
+#include "erri_b176.h"
 #include "model.h"
+#include "rng.h"
 
 #define TG_PI 3.14159265358979323846
 #define TG_RAIL_BASE 1.5      /* m between the rail centres: roll = asin(cant / b) */
@@ -39,8 +39,7 @@ typedef struct {
     int nlines;
     double *omega, *ay, *az, *cpy, *spy, *cpz, *spz; /* cos, sin of the phases */
     double harm_y, harm_z, harm_w, wob_y, wob_z, wob_w;
-    size_t nt;                    /* measured table rows (0: none) */
-    double *ts, *ty, *tm;         /* s, values and Catmull-Rom slopes (3 columns per row) */
+    ProfileTable table;           /* measured (table.n == 0: none) */
     double *kinks;                /* element ends and table rows inside (0, length) */
     size_t nk;
     double r0e[3], Cen0[3][3], omega_n0[3];
@@ -57,7 +56,7 @@ static void tg_free(TrackGeom *g) {
     free(g->hs), free(g->k0), free(g->k1), free(g->c0), free(g->c1), free(g->chi);
     free(g->vs), free(g->g0), free(g->g1), free(g->pieces), free(g->P), free(g->hshape), free(g->vshape);
     free(g->omega), free(g->ay), free(g->az), free(g->cpy), free(g->spy), free(g->cpz), free(g->spz);
-    free(g->ts), free(g->ty), free(g->tm), free(g->kinks);
+    profile_free(&g->table), free(g->kinks);
     memset(g, 0, sizeof *g);
 }
 
@@ -91,111 +90,85 @@ static int tg_push(TgRow **rows, size_t *n, size_t *cap, const TgRow *r) {
 
 #define TG_FAIL(...)                    \
     do {                                \
-        model_error(m, __VA_ARGS__);    \
+        csv_fail(&t, __VA_ARGS__);      \
         goto fail;                      \
     } while (0)
 
 /* Reads and checks the table into g (alignment part); 1 after one model_error. */
 static int tg_read(ModelInstance *m, TrackGeom *g, const char *file) {
-    char *path = model_resolve_path(m, file), line[4096];
-    FILE *f = NULL;
+    CsvTable t;
     TgRow *H = NULL, *V = NULL, r;
-    size_t nh = 0, nv = 0, ch = 0, cv = 0, i;
-    long lineno = 0;
-    size_t ncol = 6;
-    if (!path) {
-        model_error(m, "track_file %s: a relative path needs the FMU's resources folder (use an "
-                       "absolute path)", file);
-        return 1;
-    }
-    f = fopen(path, "rb");
-    if (!f) TG_FAIL("track_file %s: cannot open (%s)", path, strerror(errno));
-    while (fgets(line, sizeof line, f)) {
-        char *fld[8], *s = line;
-        size_t nf, j;
+    size_t nh = 0, nv = 0, ch = 0, cv = 0, i, j, ncol = 6;
+    int rc;
+    if (csv_open(&t, m, "track_file", file, CSV_SKIP_BOM)) return 1;
+    for (j = 0; j < t.ncol; j++)
+        if ((t.ncol != 6 && t.ncol != 7) || strcmp(t.header[j], TG_COLUMNS[j]) != 0)
+            TG_FAIL(1, 0, "header must be kind,start_m,end_m,radius_m,cant_mm,gradient_permille (and "
+                    "optionally ,transition)");
+    if (t.ncol) ncol = t.ncol;
+    while ((rc = csv_next_row(&t)) > 0) {
+        char **fld = t.cell;
+        const long lineno = t.line;
         double v[5];
         int has[5];
-        lineno++;
-        if (lineno == 1 && (unsigned char)s[0] == 0xEF && (unsigned char)s[1] == 0xBB &&
-            (unsigned char)s[2] == 0xBF)
-            s += 3;
-        s[strcspn(s, "\n")] = '\0';
-        if (*csv_trim(s) == '\0') continue;
-        nf = csv_split(s, fld, 8);
-        if (lineno == 1) {
-            for (j = 0; j < nf; j++)
-                if ((nf != 6 && nf != 7) || strcmp(fld[j], TG_COLUMNS[j]) != 0)
-                    TG_FAIL("track_file %s, line 1: header must be kind,start_m,end_m,radius_m,"
-                            "cant_mm,gradient_permille (and optionally ,transition)", path);
-            ncol = nf;
-            continue;
-        }
-        if (nf != ncol)
-            TG_FAIL("track_file %s, line %ld: %lu fields, expected %lu", path, lineno, (unsigned long)nf,
-                    (unsigned long)ncol);
+        if (t.ncell != ncol)
+            TG_FAIL(lineno, 0, "%lu fields, expected %lu", (unsigned long)t.ncell, (unsigned long)ncol);
         r.line = lineno;
         r.kind = -1;
         for (j = 0; j < 6; j++)
             if (strcmp(fld[0], TG_KINDS[j]) == 0) r.kind = (int)j;
         if (r.kind < 0)
-            TG_FAIL("track_file %s, line %ld, column 1 (kind): '%s' is not one of straight, clothoid, "
-                    "curve_left, curve_right, grade, vertical_curve", path, lineno, fld[0]);
+            TG_FAIL(lineno, 1, "'%s' is not one of straight, clothoid, curve_left, curve_right, grade, "
+                    "vertical_curve", fld[0]);
         for (j = 0; j < 5; j++) {
             has[j] = *fld[j + 1] != '\0';
             v[j] = 0.0;
-            if (has[j] && csv_number(fld[j + 1], &v[j]))
-                TG_FAIL("track_file %s, line %ld, column %lu (%s): '%s' is not a finite number", path,
-                        lineno, (unsigned long)j + 2, TG_COLUMNS[j + 1], fld[j + 1]);
+            if (has[j] && csv_number(fld[j + 1], &v[j]) != CSV_OK)
+                TG_FAIL(lineno, j + 2, "'%s' is not a finite number", fld[j + 1]);
         }
-        if (!has[0] || !has[1])
-            TG_FAIL("track_file %s, line %ld, column %d (%s): missing", path, lineno, has[0] ? 3 : 2,
-                    has[0] ? "end_m" : "start_m");
+        if (!has[0] || !has[1]) TG_FAIL(lineno, has[0] ? 3 : 2, "missing");
         r.start = v[0], r.end = v[1], r.radius = v[2], r.cant = v[3], r.grad = v[4];
         r.shape = 0;
         if (ncol == 7 && *fld[6]) {
             r.shape = -1;
             for (j = 0; j < 2; j++)
                 if (strcmp(fld[6], TG_SHAPES[j]) == 0) r.shape = (int)j;
-            if (r.shape < 0)
-                TG_FAIL("track_file %s, line %ld, column 7 (transition): '%s' is not one of linear, bloss",
-                        path, lineno, fld[6]);
+            if (r.shape < 0) TG_FAIL(lineno, 7, "'%s' is not one of linear, bloss", fld[6]);
             if (r.kind != TG_CLOTHOID && r.kind != TG_VCURVE)
-                TG_FAIL("track_file %s, line %ld, column 7 (transition): only clothoid and vertical_curve "
-                        "rows take a transition shape, not a %s", path, lineno, TG_KINDS[r.kind]);
+                TG_FAIL(lineno, 7, "only clothoid and vertical_curve rows take a transition shape, not a %s",
+                        TG_KINDS[r.kind]);
         }
         {
             const int horizontal = r.kind <= TG_CURVE_RIGHT;
             const size_t n = horizontal ? nh : nv;
             const double expected = n ? (horizontal ? H : V)[n - 1].end : 0.0;
             if (!(r.end > r.start))
-                TG_FAIL("track_file %s, line %ld, column 3 (end_m): %g is not greater than start_m %g "
-                        "(distances must increase)", path, lineno, r.end, r.start);
+                TG_FAIL(lineno, 3, "%g is not greater than start_m %g (distances must increase)", r.end,
+                        r.start);
             if (fabs(r.start - expected) > 1e-9 * (fabs(expected) > 1.0 ? fabs(expected) : 1.0))
-                TG_FAIL("track_file %s, line %ld, column 2 (start_m): %g must equal %g, where the previous "
-                        "%s element ends (no gaps or overlaps, distances increasing)", path, lineno,
-                        r.start, expected, horizontal ? "horizontal" : "vertical");
+                TG_FAIL(lineno, 2, "%g must equal %g, where the previous %s element ends (no gaps or "
+                        "overlaps, distances increasing)", r.start, expected,
+                        horizontal ? "horizontal" : "vertical");
             r.start = expected;
             if (r.kind == TG_CURVE_LEFT || r.kind == TG_CURVE_RIGHT) {
                 if (!has[2] || !(r.radius > 0))
-                    TG_FAIL("track_file %s, line %ld, column 4 (radius_m): a %s needs a radius > 0 m",
-                            path, lineno, TG_KINDS[r.kind]);
+                    TG_FAIL(lineno, 4, "a %s needs a radius > 0 m", TG_KINDS[r.kind]);
                 if (!(r.cant >= 0 && r.cant < TG_MAX_CANT_MM))
-                    TG_FAIL("track_file %s, line %ld, column 5 (cant_mm): %g must be in [0, %g) mm", path,
-                            lineno, r.cant, TG_MAX_CANT_MM);
+                    TG_FAIL(lineno, 5, "%g must be in [0, %g) mm", r.cant, TG_MAX_CANT_MM);
             }
             if (r.kind == TG_GRADE && (!has[4] || !(fabs(r.grad) < TG_MAX_GRADIENT)))
-                TG_FAIL("track_file %s, line %ld, column 6 (gradient_permille): a grade needs a gradient "
-                        "below %g per mille in size", path, lineno, TG_MAX_GRADIENT);
+                TG_FAIL(lineno, 6, "a grade needs a gradient below %g per mille in size", TG_MAX_GRADIENT);
             if (horizontal ? tg_push(&H, &nh, &ch, &r) : tg_push(&V, &nv, &cv, &r))
-                TG_FAIL("track_file %s: out of memory", path);
+                TG_FAIL(0, 0, "out of memory");
         }
     }
+    if (rc < 0) goto fail;
     if (!nh || !nv)
-        TG_FAIL("track_file %s: needs horizontal (straight, clothoid, curve_left, curve_right) and "
-                "vertical (grade, vertical_curve) elements", path);
+        TG_FAIL(0, 0, "needs horizontal (straight, clothoid, curve_left, curve_right) and vertical (grade, "
+                "vertical_curve) elements");
     if (fabs(H[nh - 1].end - V[nv - 1].end) > 1e-9 * H[nh - 1].end)
-        TG_FAIL("track_file %s: the horizontal elements end at %g m, the vertical ones at %g m: both "
-                "must cover the same length", path, H[nh - 1].end, V[nv - 1].end);
+        TG_FAIL(0, 0, "the horizontal elements end at %g m, the vertical ones at %g m: both must cover the "
+                "same length", H[nh - 1].end, V[nv - 1].end);
     g->nh = nh, g->nv = nv;
     g->hs = (double *)calloc(nh + 1, sizeof(double));
     g->chi = (double *)calloc(nh + 1, sizeof(double));
@@ -206,7 +179,7 @@ static int tg_read(ModelInstance *m, TrackGeom *g, const char *file) {
     g->hshape = (int *)calloc(nh, sizeof(int)), g->vshape = (int *)calloc(nv, sizeof(int));
     if (!g->hs || !g->chi || !g->k0 || !g->k1 || !g->c0 || !g->c1 || !g->vs || !g->g0 || !g->g1 ||
         !g->hshape || !g->vshape)
-        TG_FAIL("track_file %s: out of memory", path);
+        TG_FAIL(0, 0, "out of memory");
     for (i = 0; i < nh; i++) {
         /* curvature and signed cant at the element's ends */
         double k = 0.0, c = 0.0;
@@ -217,8 +190,7 @@ static int tg_read(ModelInstance *m, TrackGeom *g, const char *file) {
             const TgRow *a = i ? &H[i - 1] : NULL, *b = i + 1 < nh ? &H[i + 1] : NULL;
             double ka, kb, ca, cb;
             if (!a || !b || a->kind == TG_CLOTHOID || b->kind == TG_CLOTHOID)
-                TG_FAIL("track_file %s, line %ld, column 1 (kind): a clothoid needs a straight or curve "
-                        "on both sides", path, e->line);
+                TG_FAIL(e->line, 1, "a clothoid needs a straight or curve on both sides");
             ka = a->kind == TG_STRAIGHT ? 0.0 : (a->kind == TG_CURVE_RIGHT ? 1.0 : -1.0) / a->radius;
             kb = b->kind == TG_STRAIGHT ? 0.0 : (b->kind == TG_CURVE_RIGHT ? 1.0 : -1.0) / b->radius;
             ca = a->kind == TG_STRAIGHT ? 0.0 : (a->kind == TG_CURVE_RIGHT ? 1.0 : -1.0) * a->cant * 1e-3;
@@ -240,20 +212,19 @@ static int tg_read(ModelInstance *m, TrackGeom *g, const char *file) {
         g->vshape[i] = e->shape;
         if (e->kind == TG_VCURVE) {
             if (!i || i + 1 >= nv || V[i - 1].kind != TG_GRADE || V[i + 1].kind != TG_GRADE)
-                TG_FAIL("track_file %s, line %ld, column 1 (kind): a vertical_curve needs a grade on both "
-                        "sides", path, e->line);
+                TG_FAIL(e->line, 1, "a vertical_curve needs a grade on both sides");
             g->g0[i] = V[i - 1].grad * 1e-3, g->g1[i] = V[i + 1].grad * 1e-3;
         } else {
             g->g0[i] = g->g1[i] = e->grad * 1e-3;
         }
     }
     g->vs[nv] = g->hs[nh];
-    fclose(f);
-    free(path), free(H), free(V);
+    csv_close(&t);
+    free(H), free(V);
     return 0;
 fail:
-    if (f) fclose(f);
-    free(path), free(H), free(V);
+    csv_close(&t);
+    free(H), free(V);
     return 1;
 }
 
@@ -262,90 +233,27 @@ static size_t tg_find(const double *x, size_t n, double s);
 /* The measured table (models/track_geometry.py: the TrackIrregularity profile_file format);
    after tg_read (it must cover 0..length). 1 after one model_error. */
 static int tg_read_table(ModelInstance *m, TrackGeom *g, const char *file) {
-    static const char *const header[4] = {"s", "alignment", "vertical_left", "vertical_right"};
-    char *path, line[4096];
-    FILE *f;
-    size_t cap = 0, n = 0, i;
-    long lineno = 0;
-    int c;
+    const ProfileTable *p = &g->table;
     if (!*file) return 0;
-    path = model_resolve_path(m, file);
-    if (!path) {
-        model_error(m, "irregularity_file %s: a relative path needs the FMU's resources folder (use an "
-                       "absolute path)", file);
-        return 1;
-    }
-    f = fopen(path, "rb");
-    if (!f) {
-        model_error(m, "irregularity_file %s: cannot open (%s)", path, strerror(errno));
+    if (profile_read(m, "irregularity_file", file, &g->table)) return 1;
+    if (p->s[0] > 0.0 || p->s[p->n - 1] < g->hs[g->nh]) {
+        char *path = model_resolve_path(m, file);
+        model_error(m, "irregularity_file %s: covers s = %g..%g m, the track needs 0..%g m", path ? path : file,
+                    p->s[0], p->s[p->n - 1], g->hs[g->nh]);
         free(path);
         return 1;
     }
-    while (fgets(line, sizeof line, f)) {
-        char *fld[5], *s = line;
-        size_t nf;
-        lineno++;
-        s[strcspn(s, "\n")] = '\0';
-        if (lineno > 1 && *csv_trim(s) == '\0') continue;
-        nf = csv_split(s, fld, 5);
-        if (lineno == 1) {
-            for (c = 0; c < 4 && nf == 4; c++)
-                if (strcmp(fld[c], header[c]) != 0) break;
-            if (nf != 4 || c != 4)
-                TG_FAIL("irregularity_file %s:1: header must be s,alignment,vertical_left,vertical_right", path);
-            continue;
-        }
-        if (nf != 4) TG_FAIL("irregularity_file %s:%ld: expected 4 comma-separated numbers", path, lineno);
-        if (n == cap) {
-            const size_t nc = cap ? 2 * cap : 256;
-            double *a = (double *)realloc(g->ts, nc * sizeof(double)), *b;
-            if (a) g->ts = a;
-            b = a ? (double *)realloc(g->ty, 3 * nc * sizeof(double)) : NULL;
-            if (!b) TG_FAIL("irregularity_file %s: out of memory", path);
-            g->ty = b;
-            cap = nc;
-        }
-        for (c = 0; c < 4; c++) {
-            double x;
-            if (csv_number(fld[c], &x)) TG_FAIL("irregularity_file %s:%ld: not a number: '%s'", path, lineno, fld[c]);
-            if (c == 0) g->ts[n] = x;
-            else g->ty[3 * n + c - 1] = x;
-        }
-        if (n > 0 && !(g->ts[n] > g->ts[n - 1]))
-            TG_FAIL("irregularity_file %s:%ld: s = %g is not greater than the previous s = %g", path, lineno,
-                    g->ts[n], g->ts[n - 1]);
-        n++;
-    }
-    if (n < 2) TG_FAIL("irregularity_file %s: needs at least two data rows", path);
-    if (g->ts[0] > 0.0 || g->ts[n - 1] < g->hs[g->nh])
-        TG_FAIL("irregularity_file %s: covers s = %g..%g m, the track needs 0..%g m", path, g->ts[0],
-                g->ts[n - 1], g->hs[g->nh]);
-    g->tm = (double *)malloc(3 * n * sizeof(double));
-    if (!g->tm) TG_FAIL("irregularity_file %s: out of memory", path);
-    for (c = 0; c < 3; c++) { /* Catmull-Rom: central differences, one-sided at the ends */
-        const double *S = g->ts, *Y = g->ty;
-        g->tm[c] = (Y[3 + c] - Y[c]) / (S[1] - S[0]);
-        for (i = 1; i + 1 < n; i++) g->tm[3 * i + c] = (Y[3 * (i + 1) + c] - Y[3 * (i - 1) + c]) / (S[i + 1] - S[i - 1]);
-        g->tm[3 * (n - 1) + c] = (Y[3 * (n - 1) + c] - Y[3 * (n - 2) + c]) / (S[n - 1] - S[n - 2]);
-    }
-    g->nt = n;
-    fclose(f);
-    free(path);
     return 0;
-fail:
-    fclose(f);
-    free(path);
-    return 1;
 }
 
 /* value, d/ds, d2/ds2 of the table's three columns at s (o[3 c + k]) */
 static void tg_table(const TrackGeom *G, double s, double o[9]) {
-    const size_t i = tg_find(G->ts, G->nt - 1, s);
-    const double h = G->ts[i + 1] - G->ts[i], t = (s - G->ts[i]) / h, t2 = t * t;
+    const size_t i = tg_find(G->table.s, G->table.n - 1, s);
+    const double h = G->table.s[i + 1] - G->table.s[i], t = (s - G->table.s[i]) / h, t2 = t * t;
     int c;
     for (c = 0; c < 3; c++) {
-        const double y0 = G->ty[3 * i + c], y1 = G->ty[3 * (i + 1) + c], m0 = G->tm[3 * i + c],
-                     m1 = G->tm[3 * (i + 1) + c];
+        const double y0 = G->table.y[3 * i + c], y1 = G->table.y[3 * (i + 1) + c], m0 = G->table.dy[3 * i + c],
+                     m1 = G->table.dy[3 * (i + 1) + c];
         o[3 * c] = (2.0 * t2 * t - 3.0 * t2 + 1.0) * y0 + (t2 * t - 2.0 * t2 + t) * h * m0 +
                    (-2.0 * t2 * t + 3.0 * t2) * y1 + (t2 * t - t2) * h * m1;
         o[3 * c + 1] = ((6.0 * t2 - 6.0 * t) * y0 + (-6.0 * t2 + 6.0 * t) * y1) / h +
@@ -451,7 +359,7 @@ static void tg_offsets(const TrackGeom *G, double s, double o[6]) {
         o[0] += G->harm_y * sn, o[1] += G->harm_y * w * cs, o[2] -= G->harm_y * w * w * sn;
         o[3] += G->harm_z * sn, o[4] += G->harm_z * w * cs, o[5] -= G->harm_z * w * w * sn;
     }
-    if (G->nt) {
+    if (G->table.n) {
         double tb[9];
         tg_table(G, s, tb);
         o[0] += tb[0], o[1] += tb[1], o[2] += tb[2];
@@ -521,16 +429,9 @@ static void tg_point(const TrackGeom *G, double s, int position, TrackPoint *P) 
 
 /* ---- setup -------------------------------------------------------------------------------- */
 
-static uint64_t tg_splitmix64(uint64_t *state) {
-    uint64_t z = (*state += UINT64_C(0x9E3779B97F4A7C15));
-    z = (z ^ (z >> 30)) * UINT64_C(0xBF58476D1CE4E5B9);
-    z = (z ^ (z >> 27)) * UINT64_C(0x94D049BB133111EB);
-    return z ^ (z >> 31);
-}
-
 /* ERRI B176 (models/track.py): A Oc^2 / ((O^2 + Or^2)(O^2 + Oc^2)) */
 static double tg_psd(double A, double omega) {
-    const double oc = 0.8246, orr = 0.0206, o2 = omega * omega;
+    const double oc = ERRI_OMEGA_C, orr = ERRI_OMEGA_R, o2 = omega * omega;
     return A * oc * oc / ((o2 + orr * orr) * (o2 + oc * oc));
 }
 
@@ -544,7 +445,7 @@ static int tg_setup(ModelInstance *m, TrackGeom *G, double lat0, double lon0, do
                     int level, double scale, int nlines, double lmin, double lmax, int seed,
                     double harm_y, double harm_z, double harm_l, double wob_y, double wob_z,
                     double wob_l) {
-    static const double AA[3] = {0.0, 2.119e-7, 6.125e-7}, AV[3] = {0.0, 4.032e-7, 1.080e-6};
+    const double *const AA = ERRI_A_ALIGNMENT, *const AV = ERRI_A_VERTICAL;
     size_t i, j, n = 0;
     double *all;
     double C[3][3];
@@ -568,12 +469,12 @@ static int tg_setup(ModelInstance *m, TrackGeom *G, double lat0, double lon0, do
     free(all);
     G->pieces[++G->np] = G->hs[G->nh];
     /* kinks: the piece ends inside (0, length) and the table rows there, sorted, unique */
-    G->kinks = (double *)malloc((G->np + G->nt + 1) * sizeof(double));
+    G->kinks = (double *)malloc((G->np + G->table.n + 1) * sizeof(double));
     if (!G->kinks) goto oom;
     n = 0;
     for (i = 1; i < G->np; i++) G->kinks[n++] = G->pieces[i];
-    for (i = 0; i < G->nt; i++)
-        if (G->ts[i] > 0.0 && G->ts[i] < G->hs[G->nh]) G->kinks[n++] = G->ts[i];
+    for (i = 0; i < G->table.n; i++)
+        if (G->table.s[i] > 0.0 && G->table.s[i] < G->hs[G->nh]) G->kinks[n++] = G->table.s[i];
     qsort(G->kinks, n, sizeof(double), tg_cmp);
     G->nk = 0;
     for (i = 0; i < n; i++)
@@ -606,11 +507,11 @@ static int tg_setup(ModelInstance *m, TrackGeom *G, double lat0, double lon0, do
             G->az[i] = scale * sqrt(2.0 * tg_psd(AV[level], w) * (wb - wa));
         }
         for (i = 0; i < (size_t)G->nlines; i++) {
-            const double phi = 2.0 * TG_PI * ((double)(tg_splitmix64(&rng) >> 11) * 0x1.0p-53);
+            const double phi = 2.0 * TG_PI * rng_uniform(&rng);
             G->cpy[i] = cos(phi), G->spy[i] = sin(phi);
         }
         for (i = 0; i < (size_t)G->nlines; i++) {
-            const double phi = 2.0 * TG_PI * ((double)(tg_splitmix64(&rng) >> 11) * 0x1.0p-53);
+            const double phi = 2.0 * TG_PI * rng_uniform(&rng);
             G->cpz[i] = cos(phi), G->spz[i] = sin(phi);
         }
     }

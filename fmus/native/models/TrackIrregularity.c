@@ -16,24 +16,20 @@
  * The variable tables (model_real_info, ...) are generated from the Python definition into
  * a separate file; the VR_/VRI_/VRS_ defines come from the generated model_config.h.
  */
-#include <errno.h>
 #include <math.h>
 #include <stdint.h>
-#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
+#include "ProfileTable.h"
+#include "erri_b176.h"
 #include "model.h"
+#include "rng.h"
 
 #define N_WHEELSETS 4
 #define MAX_GRID_POINTS (1L << 22) /* 48 bytes per point: at most 192 MiB of tables */
-#define LINE_MAX_LEN 4096
 
 static const double PI = 3.14159265358979323846; /* == Python's math.pi */
-/* ERRI B176 (ORE B176 RP1) spectra, Omega in rad/m, A in m rad */
-static const double OMEGA_C = 0.8246, OMEGA_R = 0.0206, OMEGA_S = 0.438;
-static const double A_A[3] = {0.0, 2.119e-7, 6.125e-7}; /* by psd_level: none, low, high */
-static const double A_V[3] = {0.0, 4.032e-7, 1.080e-6};
 
 static const fmi2ValueReference VR_ALIGNMENT[N_WHEELSETS] = {
     VR_alignment_1, VR_alignment_2, VR_alignment_3, VR_alignment_4};
@@ -58,37 +54,22 @@ typedef struct {
     double *grid;
     long M;
     double L, h;
-    /* measured profile: rows s[n], y[3n + c] and Catmull-Rom slopes dy[3n + c],
-       c = alignment, vertical_left, vertical_right; n_rows == 0 when none */
-    size_t n_rows;
-    double *tab_s, *tab_y, *tab_dy;
+    ProfileTable profile; /* measured; n == 0 when none */
 } TrackData;
-
-/* ---- SplitMix64 (Steele, Lea & Flood 2014), identical to railfmu.models.track.irregularity.SplitMix64 ---- */
-static uint64_t splitmix64_next(uint64_t *state) {
-    uint64_t z = (*state += UINT64_C(0x9E3779B97F4A7C15));
-    z = (z ^ (z >> 30)) * UINT64_C(0xBF58476D1CE4E5B9);
-    z = (z ^ (z >> 27)) * UINT64_C(0x94D049BB133111EB);
-    return z ^ (z >> 31);
-}
-
-static double splitmix64_uniform(uint64_t *state) {
-    return (double)(splitmix64_next(state) >> 11) * 0x1.0p-53;
-}
 
 /* ---- spectra (same operation order as models/track.py) ---- */
 static double psd_shape(double o2) {
-    return OMEGA_C * OMEGA_C / ((o2 + OMEGA_R * OMEGA_R) * (o2 + OMEGA_C * OMEGA_C));
+    return ERRI_OMEGA_C * ERRI_OMEGA_C / ((o2 + ERRI_OMEGA_R * ERRI_OMEGA_R) * (o2 + ERRI_OMEGA_C * ERRI_OMEGA_C));
 }
 
 static double psd_channel(int channel, int level, double omega, double b) {
     const double o2 = omega * omega;
     switch (channel) {
-    case 0: return A_A[level] * psd_shape(o2);
-    case 1: return A_V[level] * psd_shape(o2);
+    case 0: return ERRI_A_ALIGNMENT[level] * psd_shape(o2);
+    case 1: return ERRI_A_VERTICAL[level] * psd_shape(o2);
     default:
-        return (A_V[level] / (b * b)) * (OMEGA_C * OMEGA_C) * o2 /
-               ((o2 + OMEGA_R * OMEGA_R) * (o2 + OMEGA_C * OMEGA_C) * (o2 + OMEGA_S * OMEGA_S));
+        return (ERRI_A_VERTICAL[level] / (b * b)) * (ERRI_OMEGA_C * ERRI_OMEGA_C) * o2 /
+               ((o2 + ERRI_OMEGA_R * ERRI_OMEGA_R) * (o2 + ERRI_OMEGA_C * ERRI_OMEGA_C) * (o2 + ERRI_OMEGA_S * ERRI_OMEGA_S));
     }
 }
 
@@ -197,7 +178,7 @@ static int build_random(ModelInstance *m, TrackData *d) {
         for (k = (long)k_lo; k < (long)k_lo + n_lines; k++) {
             const double omega = (double)k * d_omega;
             const double a = scale * channel_scale[c] * sqrt(2.0 * psd_channel(c, level, omega, b) * d_omega);
-            const double phi = 2.0 * PI * splitmix64_uniform(&rng);
+            const double phi = 2.0 * PI * rng_uniform(&rng);
             const double xr = 0.5 * a * cos(phi), xi = 0.5 * a * sin(phi);
             z[2 * k] = xr * (1.0 - omega);       /* X + i (i Omega X) = X (1 - Omega) */
             z[2 * k + 1] = xi * (1.0 - omega);
@@ -249,141 +230,14 @@ static void eval_random(const TrackData *d, double s, double *v, double *dv) {
                 d->grid[6 * n1 + 3 + c], &v[c], &dv[c]);
 }
 
-/* ---- measured profile table ---- */
-static char *trim(char *p) {
-    char *e;
-    while (*p == ' ' || *p == '\t' || *p == '\r' || *p == '\n') p++;
-    e = p + strlen(p);
-    while (e > p && (e[-1] == ' ' || e[-1] == '\t' || e[-1] == '\r' || e[-1] == '\n')) *--e = '\0';
-    return p;
-}
-
-/* Split line at commas into at most max fields (trimmed); returns the field count. */
-static int split_fields(char *line, char **fields, int max) {
-    int n = 0;
-    char *p = line;
-    for (;;) {
-        char *comma = strchr(p, ',');
-        if (comma) *comma = '\0';
-        if (n < max) fields[n] = trim(p);
-        n++;
-        if (!comma) return n;
-        p = comma + 1;
-    }
-}
-
-static int parse_number(const char *f, double *x) {
-    char *end;
-    if (!*f || strspn(f, "0123456789eE.+-") != strlen(f)) return -1;
-    errno = 0;
-    *x = strtod(f, &end);
-    if (end == f || *end != '\0' || !isfinite(*x)) return -1;
-    return 0;
-}
-
-static int read_profile(ModelInstance *m, TrackData *d, const char *path) {
-    static const char *const header[4] = {"s", "alignment", "vertical_left", "vertical_right"};
-    char line[LINE_MAX_LEN];
-    char *fields[4];
-    size_t cap = 0, n = 0, i;
-    int lineno = 0, c, nf, ok = -1;
-    FILE *f = fopen(path, "r");
-    if (!f) {
-        model_error(m, "profile_file %s: cannot open (%s)", path, strerror(errno));
-        return -1;
-    }
-    while (fgets(line, sizeof line, f)) {
-        lineno++;
-        if (!strchr(line, '\n') && !feof(f)) {
-            model_error(m, "profile_file %s:%d: line longer than %d characters", path, lineno,
-                        LINE_MAX_LEN - 2);
-            goto done;
-        }
-        if (lineno == 1) {
-            nf = split_fields(line, fields, 4);
-            for (c = 0; c < 4 && nf == 4; c++)
-                if (strcmp(fields[c], header[c]) != 0) break;
-            if (nf != 4 || c != 4) {
-                model_error(m, "profile_file %s:1: header must be s,alignment,vertical_left,"
-                            "vertical_right", path);
-                goto done;
-            }
-            continue;
-        }
-        if (*trim(line) == '\0') continue;
-        nf = split_fields(line, fields, 4);
-        if (nf != 4) {
-            model_error(m, "profile_file %s:%d: expected 4 comma-separated numbers", path, lineno);
-            goto done;
-        }
-        if (n == cap) {
-            const size_t nc = cap ? 2 * cap : 256;
-            double *ns = (double *)realloc(d->tab_s, sizeof(double) * nc);
-            double *ny;
-            if (ns) d->tab_s = ns;
-            ny = ns ? (double *)realloc(d->tab_y, sizeof(double) * 3 * nc) : NULL;
-            if (!ny) {
-                model_error(m, "profile_file %s: out of memory", path);
-                goto done;
-            }
-            d->tab_y = ny;
-            cap = nc;
-        }
-        for (c = 0; c < 4; c++) {
-            double x;
-            if (parse_number(fields[c], &x) != 0) {
-                model_error(m, "profile_file %s:%d: not a number: '%s'", path, lineno, fields[c]);
-                goto done;
-            }
-            if (c == 0) d->tab_s[n] = x;
-            else d->tab_y[3 * n + c - 1] = x;
-        }
-        if (n > 0 && !(d->tab_s[n] > d->tab_s[n - 1])) {
-            model_error(m, "profile_file %s:%d: s = %g is not greater than the previous s = %g",
-                        path, lineno, d->tab_s[n], d->tab_s[n - 1]);
-            goto done;
-        }
-        n++;
-    }
-    if (ferror(f)) {
-        model_error(m, "profile_file %s: read error", path);
-        goto done;
-    }
-    if (lineno == 0) {
-        model_error(m, "profile_file %s:1: header must be s,alignment,vertical_left,vertical_right",
-                    path);
-        goto done;
-    }
-    if (n < 2) {
-        model_error(m, "profile_file %s: needs at least two data rows", path);
-        goto done;
-    }
-    d->tab_dy = (double *)malloc(sizeof(double) * 3 * n);
-    if (!d->tab_dy) {
-        model_error(m, "profile_file %s: out of memory", path);
-        goto done;
-    }
-    /* Catmull-Rom slopes: central differences, one-sided at the ends */
-    for (c = 0; c < 3; c++) {
-        const double *s = d->tab_s, *y = d->tab_y;
-        d->tab_dy[c] = (y[3 + c] - y[c]) / (s[1] - s[0]);
-        for (i = 1; i + 1 < n; i++)
-            d->tab_dy[3 * i + c] = (y[3 * (i + 1) + c] - y[3 * (i - 1) + c]) / (s[i + 1] - s[i - 1]);
-        d->tab_dy[3 * (n - 1) + c] = (y[3 * (n - 1) + c] - y[3 * (n - 2) + c]) / (s[n - 1] - s[n - 2]);
-    }
-    d->n_rows = n;
-    ok = 0;
-done:
-    fclose(f);
-    return ok;
-}
-
+/* ---- measured profile table (ProfileTable.h) ---- */
 /* Table at s: v[3], dv[3] (alignment, vertical_left, vertical_right); 0 outside its range. */
 static void eval_profile(const TrackData *d, double s, double *v, double *dv) {
     size_t lo, hi;
     int c;
-    const size_t n = d->n_rows;
-    if (n == 0 || !(s >= d->tab_s[0] && s <= d->tab_s[n - 1])) {
+    const ProfileTable *p = &d->profile;
+    const size_t n = p->n;
+    if (n == 0 || !(s >= p->s[0] && s <= p->s[n - 1])) {
         for (c = 0; c < 3; c++) v[c] = dv[c] = 0.0;
         return;
     }
@@ -391,14 +245,14 @@ static void eval_profile(const TrackData *d, double s, double *v, double *dv) {
     hi = n - 1;
     while (hi - lo > 1) {
         const size_t mid = lo + (hi - lo) / 2;
-        if (d->tab_s[mid] <= s) lo = mid;
+        if (p->s[mid] <= s) lo = mid;
         else hi = mid;
     }
     {
-        const double h = d->tab_s[lo + 1] - d->tab_s[lo], t = (s - d->tab_s[lo]) / h;
+        const double h = p->s[lo + 1] - p->s[lo], t = (s - p->s[lo]) / h;
         for (c = 0; c < 3; c++)
-            hermite(t, h, d->tab_y[3 * lo + c], d->tab_dy[3 * lo + c], d->tab_y[3 * (lo + 1) + c],
-                    d->tab_dy[3 * (lo + 1) + c], &v[c], &dv[c]);
+            hermite(t, h, p->y[3 * lo + c], p->dy[3 * lo + c], p->y[3 * (lo + 1) + c],
+                    p->dy[3 * (lo + 1) + c], &v[c], &dv[c]);
     }
 }
 
@@ -424,15 +278,12 @@ static const char *profile_file(ModelInstance *m) {
 static void free_data(TrackData *d) {
     if (!d) return;
     free(d->grid);
-    free(d->tab_s);
-    free(d->tab_y);
-    free(d->tab_dy);
+    profile_free(&d->profile);
     free(d);
 }
 
 static int build_tables(ModelInstance *m) {
     const char *file = profile_file(m);
-    size_t len = strlen(file);
     TrackData *d = (TrackData *)calloc(1, sizeof(TrackData));
     model_free(m);
     if (!d) {
@@ -443,20 +294,9 @@ static int build_tables(ModelInstance *m) {
         free_data(d);
         return -1;
     }
-    if (len > 0) {
-        char *path = model_resolve_path(m, file);
-        int rc;
-        if (!path) {
-            model_error(m, "profile_file %s: cannot resolve the path", file);
-            free_data(d);
-            return -1;
-        }
-        rc = read_profile(m, d, path);
-        free(path);
-        if (rc != 0) {
-            free_data(d);
-            return -1;
-        }
+    if (*file && profile_read(m, "profile_file", file, &d->profile) != 0) {
+        free_data(d);
+        return -1;
     }
     m->modelData = d;
     return 0;
@@ -579,7 +419,7 @@ int model_outputs(ModelInstance *m) {
             zl += r[VR_step_vertical];
             zr += r[VR_step_vertical];
         }
-        if (d->n_rows) {
+        if (d->profile.n) {
             eval_profile(d, s, v, dv);
             ali += g * v[0];
             zl += g * v[1];

@@ -400,13 +400,20 @@ static int null_arg(ModelInstance *m, const char *function, const char *arg, con
 
 /* ---- start values ------------------------------------------------------------------- */
 
-static void free_strings(ModelInstance *m) {
 #if N_STRING > 0
+/* the N_STRING strings of an instance or a snapshot */
+static void free_string_array(char **s) {
     size_t k;
     for (k = 0; k < N_STRING; k++) {
-        free(m->s[k]);
-        m->s[k] = NULL;
+        free(s[k]);
+        s[k] = NULL;
     }
+}
+#endif
+
+static void free_strings(ModelInstance *m) {
+#if N_STRING > 0
+    free_string_array(m->s);
 #else
     (void)m;
 #endif
@@ -747,267 +754,202 @@ static int refresh_outputs(ModelInstance *m, const char *function) {
     return 1;
 }
 
-fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
-                       fmi2Real value[]) {
-    size_t k;
-    ENTER("fmi2GetReal", MASK_Get);
-    if (nvr == 0) return fmi2OK;
-    if (!refresh_outputs(m, "fmi2GetReal")) return fmi2Error;
-    if (null_arg(m, "fmi2GetReal", "vr[]", vr) || null_arg(m, "fmi2GetReal", "value[]", value))
-        return fmi2Error;
-    for (k = 0; k < nvr; k++) {
-        if (!vr_in_range(m, "fmi2GetReal", vr[k], N_REAL)) return fmi2Error;
-        value[k] = m->r[vr[k]];
-    }
-    return fmi2OK;
-}
+/* One get and one set for the four types: a view of a type's variables (values, infos,
+   sizes) and the same checks and messages for each. */
+typedef enum { VT_REAL, VT_INTEGER, VT_BOOLEAN, VT_STRING } VarType;
 
-fmi2Status fmi2GetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
-                          fmi2Integer value[]) {
-    size_t k;
-    ENTER("fmi2GetInteger", MASK_Get);
-    if (nvr == 0) return fmi2OK;
-    if (!refresh_outputs(m, "fmi2GetInteger")) return fmi2Error;
-    if (null_arg(m, "fmi2GetInteger", "vr[]", vr) ||
-        null_arg(m, "fmi2GetInteger", "value[]", value))
-        return fmi2Error;
-    for (k = 0; k < nvr; k++) {
-        if (!vr_in_range(m, "fmi2GetInteger", vr[k], N_INTEGER)) return fmi2Error;
+static const char *const GET_NAME[4] = {"fmi2GetReal", "fmi2GetInteger", "fmi2GetBoolean",
+                                        "fmi2GetString"};
+static const char *const SET_NAME[4] = {"fmi2SetReal", "fmi2SetInteger", "fmi2SetBoolean",
+                                        "fmi2SetString"};
+
+typedef struct {
+    size_t n, size;            /* variables of the type, bytes per value */
+    char *values;              /* m->r, m->i, m->b or m->s (NULL when n == 0) */
+    const VariableInfo *info;
+} TypeView;
+
+static TypeView type_view(ModelInstance *m, VarType t) {
+    TypeView v = {0, 0, NULL, NULL};
+    switch (t) {
+    case VT_REAL:
+        v.n = N_REAL, v.size = sizeof(fmi2Real), v.values = (char *)m->r, v.info = model_real_info;
+        break;
+    case VT_INTEGER:
+        v.size = sizeof(fmi2Integer);
 #if N_INTEGER > 0
-        value[k] = m->i[vr[k]];
+        v.n = N_INTEGER, v.values = (char *)m->i, v.info = model_integer_info;
 #endif
+        break;
+    case VT_BOOLEAN:
+        v.size = sizeof(fmi2Boolean);
+#if N_BOOLEAN > 0
+        v.n = N_BOOLEAN, v.values = (char *)m->b, v.info = model_boolean_info;
+#endif
+        break;
+    case VT_STRING:
+        v.size = sizeof(char *);
+#if N_STRING > 0
+        v.n = N_STRING, v.values = (char *)m->s, v.info = model_string_info;
+#endif
+        break;
     }
-    return fmi2OK;
+    return v;
 }
 
-fmi2Status fmi2GetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
-                          fmi2Boolean value[]) {
-    size_t k;
-    ENTER("fmi2GetBoolean", MASK_Get);
-    if (nvr == 0) return fmi2OK;
-    if (!refresh_outputs(m, "fmi2GetBoolean")) return fmi2Error;
-    if (null_arg(m, "fmi2GetBoolean", "vr[]", vr) ||
-        null_arg(m, "fmi2GetBoolean", "value[]", value))
-        return fmi2Error;
-    for (k = 0; k < nvr; k++) {
-        if (!vr_in_range(m, "fmi2GetBoolean", vr[k], N_BOOLEAN)) return fmi2Error;
-#if N_BOOLEAN > 0
-        value[k] = m->b[vr[k]];
+static int is_state(VarType t, fmi2ValueReference vr) {
+#if N_STATES > 0
+    return t == VT_REAL && is_state_vr(vr);
+#else
+    (void)t, (void)vr;
+    return 0;
 #endif
+}
+
+/* Strings belong to the instance: copy all first, so running out of memory changes
+   nothing. 0 after one model_error. */
+static int set_strings(ModelInstance *m, const fmi2ValueReference vr[], size_t nvr,
+                       const fmi2String value[]) {
+#if N_STRING > 0
+    size_t k;
+    char **copies = (char **)calloc(nvr, sizeof *copies);
+    int failed = copies == NULL;
+    for (k = 0; k < nvr && !failed; k++) {
+        copies[k] = dup_string(value[k]);
+        failed = copies[k] == NULL;
     }
-    return fmi2OK;
+    if (failed) {
+        if (copies) {
+            for (k = 0; k < nvr; k++) free(copies[k]);
+            free(copies);
+        }
+        model_error(m, "fmi2SetString: out of memory");
+        return 0;
+    }
+    for (k = 0; k < nvr; k++) {
+        free(m->s[vr[k]]);
+        m->s[vr[k]] = copies[k];
+    }
+    free(copies);
+#else
+    (void)m, (void)vr, (void)nvr, (void)value;
+#endif
+    return 1;
 }
 
 /* The returned strings belong to the instance; they stay valid until the variable is set
    again, the instance is reset or freed (FMI 2.0.4, 2.1.7). */
-fmi2Status fmi2GetString(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
-                         fmi2String value[]) {
+static fmi2Status get_values(fmi2Component c, VarType t, const fmi2ValueReference vr[], size_t nvr,
+                             void *value) {
+    const char *fn = GET_NAME[t];
     size_t k;
-    ENTER("fmi2GetString", MASK_Get);
+    TypeView v;
+    ENTER(fn, MASK_Get);
     if (nvr == 0) return fmi2OK;
-    if (!refresh_outputs(m, "fmi2GetString")) return fmi2Error;
-    if (null_arg(m, "fmi2GetString", "vr[]", vr) ||
-        null_arg(m, "fmi2GetString", "value[]", value))
-        return fmi2Error;
+    if (!refresh_outputs(m, fn)) return fmi2Error;
+    if (null_arg(m, fn, "vr[]", vr) || null_arg(m, fn, "value[]", value)) return fmi2Error;
+    v = type_view(m, t);
     for (k = 0; k < nvr; k++) {
-        if (!vr_in_range(m, "fmi2GetString", vr[k], N_STRING)) return fmi2Error;
-#if N_STRING > 0
-        value[k] = m->s[vr[k]];
-#endif
+        if (!vr_in_range(m, fn, vr[k], v.n)) return fmi2Error;
+        memcpy((char *)value + k * v.size, v.values + vr[k] * v.size, v.size);
     }
     return fmi2OK;
 }
 
-/* The fmi2SetXXX functions check every (vr, value) first and change nothing unless all
-   are acceptable, so a refused call leaves the instance as it was. */
-
-fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
-                       const fmi2Real value[]) {
+/* Checks every (vr, value) first and changes nothing unless all are acceptable, so a
+   refused call leaves the instance as it was; a tunable parameter set during the run is
+   checked again (model_check_parameters) and undone on failure. */
+static fmi2Status set_values(fmi2Component c, VarType t, const fmi2ValueReference vr[], size_t nvr,
+                             const void *value) {
+    const char *fn = SET_NAME[t];
     size_t k;
     int tunableChanged = 0, inputChanged = 0;
-    fmi2Real *old;
-    ENTER("fmi2SetReal", MASK_Set);
+    char *old = NULL;
+    TypeView v;
+    ENTER(fn, MASK_Set);
     if (nvr == 0) return fmi2OK;
     mark_outputs_stale(m);
-    if (null_arg(m, "fmi2SetReal", "vr[]", vr) || null_arg(m, "fmi2SetReal", "value[]", value))
-        return fmi2Error;
+    if (null_arg(m, fn, "vr[]", vr) || null_arg(m, fn, "value[]", value)) return fmi2Error;
+    v = type_view(m, t);
     for (k = 0; k < nvr; k++) {
-        int isState = 0;
-        if (!vr_in_range(m, "fmi2SetReal", vr[k], N_REAL)) return fmi2Error;
-#if N_STATES > 0
-        isState = is_state_vr(vr[k]);
-#endif
-        if (!settable(m, "fmi2SetReal", &model_real_info[vr[k]], isState)) return fmi2Error;
-        if (!isfinite(value[k])) {
-            model_error(m, "fmi2SetReal: value %g for %s is not finite", value[k],
-                        model_real_info[vr[k]].name);
+        const VariableInfo *info;
+        if (!vr_in_range(m, fn, vr[k], v.n)) return fmi2Error;
+        info = &v.info[vr[k]];
+        if (!settable(m, fn, info, is_state(t, vr[k]))) return fmi2Error;
+        if (t == VT_REAL && !isfinite(((const fmi2Real *)value)[k])) {
+            model_error(m, "%s: value %g for %s is not finite", fn, ((const fmi2Real *)value)[k],
+                        info->name);
             return fmi2Error;
         }
-        if (m->state == STATE_STEP_COMPLETE && tunable_parameter(&model_real_info[vr[k]]))
-            tunableChanged = 1;
+        if (t == VT_STRING && !((const fmi2String *)value)[k]) {
+            model_error(m, "%s: value for %s is NULL", fn, info->name);
+            return fmi2Error;
+        }
+        tunableChanged |= m->state == STATE_STEP_COMPLETE && tunable_parameter(info);
+        inputChanged |= info->causality == CAUSALITY_INPUT;
     }
-    for (k = 0; k < nvr; k++) inputChanged |= model_real_info[vr[k]].causality == CAUSALITY_INPUT;
-    if (!tunableChanged) {
-        for (k = 0; k < nvr; k++) m->r[vr[k]] = value[k];
-        if (inputChanged) m->inputTime = m->r[0]; /* a first-order hold restarts from now */
-        return fmi2OK;
-    }
-    /* a tunable parameter during the run: apply, check, undo on failure */
-    old = (fmi2Real *)malloc(nvr * sizeof *old);
-    if (!old) {
-        model_error(m, "fmi2SetReal: out of memory");
-        return fmi2Error;
+    if (t == VT_STRING) /* no string parameter is checked by the models */
+        return set_strings(m, vr, nvr, (const fmi2String *)value) ? fmi2OK : fmi2Error;
+    if (tunableChanged) {
+        old = (char *)malloc(nvr * v.size);
+        if (!old) {
+            model_error(m, "%s: out of memory", fn);
+            return fmi2Error;
+        }
+        for (k = 0; k < nvr; k++) memcpy(old + k * v.size, v.values + vr[k] * v.size, v.size);
     }
     for (k = 0; k < nvr; k++) {
-        old[k] = m->r[vr[k]];
-        m->r[vr[k]] = value[k];
+        if (t == VT_BOOLEAN) {
+            const fmi2Boolean b = ((const fmi2Boolean *)value)[k] ? fmi2True : fmi2False;
+            memcpy(v.values + vr[k] * v.size, &b, v.size);
+        } else {
+            memcpy(v.values + vr[k] * v.size, (const char *)value + k * v.size, v.size);
+        }
     }
-    if (model_check_parameters(m) != 0) {
-        for (k = nvr; k-- > 0;) m->r[vr[k]] = old[k]; /* reverse: repeated vrs */
+    if (tunableChanged && model_check_parameters(m) != 0) {
+        for (k = nvr; k-- > 0;) /* reverse: repeated vrs */
+            memcpy(v.values + vr[k] * v.size, old + k * v.size, v.size);
         free(old);
         return fmi2Error;
     }
     free(old);
-    if (inputChanged) m->inputTime = m->r[0];
+    if (t == VT_REAL && inputChanged) m->inputTime = m->r[0]; /* a first-order hold restarts from now */
     return fmi2OK;
 }
 
+fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2Real value[]) {
+    return get_values(c, VT_REAL, vr, nvr, value);
+}
+fmi2Status fmi2GetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2Integer value[]) {
+    return get_values(c, VT_INTEGER, vr, nvr, value);
+}
+fmi2Status fmi2GetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2Boolean value[]) {
+    return get_values(c, VT_BOOLEAN, vr, nvr, value);
+}
+fmi2Status fmi2GetString(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2String value[]) {
+    return get_values(c, VT_STRING, vr, nvr, (void *)value);
+}
+fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, const fmi2Real value[]) {
+    return set_values(c, VT_REAL, vr, nvr, value);
+}
 fmi2Status fmi2SetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
                           const fmi2Integer value[]) {
-    size_t k;
-    ENTER("fmi2SetInteger", MASK_Set);
-    if (nvr == 0) return fmi2OK;
-    mark_outputs_stale(m);
-    if (null_arg(m, "fmi2SetInteger", "vr[]", vr) ||
-        null_arg(m, "fmi2SetInteger", "value[]", value))
-        return fmi2Error;
-    for (k = 0; k < nvr; k++) {
-        if (!vr_in_range(m, "fmi2SetInteger", vr[k], N_INTEGER)) return fmi2Error;
-#if N_INTEGER > 0
-        if (!settable(m, "fmi2SetInteger", &model_integer_info[vr[k]], 0)) return fmi2Error;
-#endif
-    }
-#if N_INTEGER > 0
-    {
-        /* apply; a tunable parameter during the run is checked again and undone on failure */
-        int tunableChanged = 0;
-        fmi2Integer *old = (fmi2Integer *)malloc(nvr * sizeof *old);
-        if (!old) {
-            model_error(m, "fmi2SetInteger: out of memory");
-            return fmi2Error;
-        }
-        for (k = 0; k < nvr; k++) {
-            tunableChanged |= m->state == STATE_STEP_COMPLETE &&
-                              tunable_parameter(&model_integer_info[vr[k]]);
-            old[k] = m->i[vr[k]];
-            m->i[vr[k]] = value[k];
-        }
-        if (tunableChanged && model_check_parameters(m) != 0) {
-            for (k = nvr; k-- > 0;) m->i[vr[k]] = old[k]; /* reverse: repeated vrs */
-            free(old);
-            return fmi2Error;
-        }
-        free(old);
-    }
-#endif
-    return fmi2OK;
+    return set_values(c, VT_INTEGER, vr, nvr, value);
 }
-
 fmi2Status fmi2SetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
                           const fmi2Boolean value[]) {
-    size_t k;
-    ENTER("fmi2SetBoolean", MASK_Set);
-    if (nvr == 0) return fmi2OK;
-    mark_outputs_stale(m);
-    if (null_arg(m, "fmi2SetBoolean", "vr[]", vr) ||
-        null_arg(m, "fmi2SetBoolean", "value[]", value))
-        return fmi2Error;
-    for (k = 0; k < nvr; k++) {
-        if (!vr_in_range(m, "fmi2SetBoolean", vr[k], N_BOOLEAN)) return fmi2Error;
-#if N_BOOLEAN > 0
-        if (!settable(m, "fmi2SetBoolean", &model_boolean_info[vr[k]], 0)) return fmi2Error;
-#endif
-    }
-#if N_BOOLEAN > 0
-    {
-        int tunableChanged = 0;
-        fmi2Boolean *old = (fmi2Boolean *)malloc(nvr * sizeof *old);
-        if (!old) {
-            model_error(m, "fmi2SetBoolean: out of memory");
-            return fmi2Error;
-        }
-        for (k = 0; k < nvr; k++) {
-            tunableChanged |= m->state == STATE_STEP_COMPLETE &&
-                              tunable_parameter(&model_boolean_info[vr[k]]);
-            old[k] = m->b[vr[k]];
-            m->b[vr[k]] = value[k] ? fmi2True : fmi2False;
-        }
-        if (tunableChanged && model_check_parameters(m) != 0) {
-            for (k = nvr; k-- > 0;) m->b[vr[k]] = old[k];
-            free(old);
-            return fmi2Error;
-        }
-        free(old);
-    }
-#endif
-    return fmi2OK;
+    return set_values(c, VT_BOOLEAN, vr, nvr, value);
 }
-
 fmi2Status fmi2SetString(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
                          const fmi2String value[]) {
-    size_t k;
-    ENTER("fmi2SetString", MASK_Set);
-    if (nvr == 0) return fmi2OK;
-    mark_outputs_stale(m);
-    if (null_arg(m, "fmi2SetString", "vr[]", vr) ||
-        null_arg(m, "fmi2SetString", "value[]", value))
-        return fmi2Error;
-    for (k = 0; k < nvr; k++) {
-        if (!vr_in_range(m, "fmi2SetString", vr[k], N_STRING)) return fmi2Error;
-#if N_STRING > 0
-        if (!settable(m, "fmi2SetString", &model_string_info[vr[k]], 0)) return fmi2Error;
-        if (!value[k]) {
-            model_error(m, "fmi2SetString: value for %s is NULL", model_string_info[vr[k]].name);
-            return fmi2Error;
-        }
-#endif
-    }
-#if N_STRING > 0
-    {
-        /* copy all first, so running out of memory changes nothing */
-        char **copies = (char **)calloc(nvr, sizeof *copies);
-        int failed = copies == NULL;
-        for (k = 0; k < nvr && !failed; k++) {
-            copies[k] = dup_string(value[k]);
-            failed = copies[k] == NULL;
-        }
-        if (failed) {
-            if (copies) {
-                for (k = 0; k < nvr; k++) free(copies[k]);
-                free(copies);
-            }
-            model_error(m, "fmi2SetString: out of memory");
-            return fmi2Error;
-        }
-        for (k = 0; k < nvr; k++) {
-            free(m->s[vr[k]]);
-            m->s[vr[k]] = copies[k];
-        }
-        free(copies);
-    }
-#endif
-    return fmi2OK;
+    return set_values(c, VT_STRING, vr, nvr, (const void *)value);
 }
 
 /* ---- FMU state (FMI 2.0.4, 2.1.8) --------------------------------------------------- */
 
 static void snapshot_free_strings(Snapshot *st) {
 #if N_STRING > 0
-    size_t k;
-    for (k = 0; k < N_STRING; k++) {
-        free(st->s[k]);
-        st->s[k] = NULL;
-    }
+    free_string_array(st->s);
 #else
     (void)st;
 #endif
