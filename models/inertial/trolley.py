@@ -468,7 +468,7 @@ def build() -> Model:
                     "increments by exact quadrature and the true navigation state",
         parameters=parameters, outputs=outputs,
         default_experiment=(0.0, 700.0, 0.005),
-        c_sources=["CsvCell.h", "Earth.h", "TrackGeometry.h", "Trolley.c"],
+        c_sources=["Earth.h", "TrackGeometry.h", "Trolley.c"],
         resources={"trolley_track.csv": DEFAULT_TRACK,
                    # Jiang et al. (2017), §5's simulation: 30 m straight (experiments/trolley_survey paper_montecarlo)
                    "trolley_straight_30m.csv": DEFAULT_TRACK.parent / "trolley_straight_30m.csv"},

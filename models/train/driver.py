@@ -128,7 +128,7 @@ def build() -> Model:
                     "from seed; true regime as an Integer",
         parameters=parameters, inputs=inputs, outputs=outputs,
         default_experiment=(0.0, 1500.0, 1.0),
-        c_sources=["CsvCell.h", "LineProfile.h", "Driver.c"],
+        c_sources=["LineProfile.h", "Driver.c"],
         resources={"line.csv": DEFAULT_LINE},
         documentation=__doc__,
     )

@@ -139,7 +139,7 @@ def build() -> Model:
         parameters=parameters, inputs=inputs, states=states, outputs=outputs,
         integrator_step=0.05,
         default_experiment=(0.0, 1500.0, 1.0),
-        c_sources=["CsvCell.h", "LineProfile.h", "TrainLongitudinal.c"],
+        c_sources=["LineProfile.h", "TrainLongitudinal.c"],
         c_constants={"MODEL_STEP_BEGIN": 1},  # set_state acts at the start of fmi2DoStep
         resources={"line.csv": DEFAULT_LINE},
         documentation=__doc__,
