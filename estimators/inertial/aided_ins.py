@@ -764,7 +764,7 @@ class AidedInsSmoother(OfflineObserver, SmootherRecord):
             if k0 < 0:  # epoch 0: the initial state, no prediction
                 rows = nav[:1].copy()
                 store["nominal"][0] = np.r_[lat0, h0, v0, 0.0, 0.0, -earth.gravity(lat0, h0), C0.ravel()]
-                block = EpochBlock(model, 0, C0[None], rows[:, 3:6], rows=rows, nav=nav)
+                block = EpochBlock(model, 0, C0[None], rows[:, 3:6], epoch_nav=rows, nav=nav)
                 Phi = Qd = None
             else:
                 i0, i1 = int(idx[k0]), int(idx[k1])
@@ -786,7 +786,7 @@ class AidedInsSmoother(OfflineObserver, SmootherRecord):
                 Phi, Qd = model.discretize(model.nav.system_matrices(lat_m, h_m, v_m, f_n, C_m), T, C_m, v_m)
                 Phi_s[k0:k1], Q_s[k0:k1] = Phi, Qd
                 store["nominal"][k0 + 1:k1 + 1] = np.column_stack((lat_m, h_m, v_m, f_n, C_m.reshape(-1, 9)))
-                block = EpochBlock(model, k0 + 1, C, rows[:, 3:6], rows=rows, C_m=C_m, T=T, start=(lat0, lon0, h0),
+                block = EpochBlock(model, k0 + 1, C, rows[:, 3:6], epoch_nav=rows, C_m=C_m, T=T, start=(lat0, lon0, h0),
                                    nav=nav)
             for aiding in aidings:
                 aiding.prepare(block)
@@ -896,7 +896,8 @@ def covariance_analysis(times, f_n, C_bn, latitude, velocity, zupt, position=Non
                         odometer=None, **settings: Any) -> CovarianceAnalysis:
     r"""The filter's and the smoother's covariance recursions on a given nominal trajectory,
     without data (Jiang et al. (2017), §5): the same error model, ``Phi``/``Q`` sampling,
-    Joseph updates and RTS covariance pass as :class:`AidedInsSmoother`.
+    aidings (the objects of :mod:`railfmu.estimators.inertial.aiding` on the given epoch masks,
+    their ``(H, R)`` only), Joseph updates and RTS covariance pass as :class:`AidedInsSmoother`.
 
     ``times`` ``(N,)`` (s): the epochs; per epoch ``k`` the nominal over the interval that ends
     at ``t_k`` (row 0 unused but for the shape): ``f_n`` ``(N, 3)`` specific force (NED, m/s2),
@@ -904,7 +905,8 @@ def covariance_analysis(times, f_n, C_bn, latitude, velocity, zupt, position=Non
     ``height`` (m) (each may be one value for all epochs); ``zupt`` ``(N,)`` bool: a
     zero-velocity update at the epoch; ``position``, ``nhc``, ``odometer`` ``(N,)`` bool or None:
     a landmark position update, the non-holonomic constraint, the odometer speed at the epoch
-    (their rows from ``C_bn`` and ``velocity``, as the filter's at the end of the interval).
+    (their rows from ``C_bn`` and ``velocity``, as the filter's at the end of the interval;
+    the masks as given: unlike the filter's, an NHC or odometer epoch may also have a ZUPT).
     ``settings``: those of :class:`AidedInsSmoother` that concern the covariances (the grade,
     the P0 sigmas, ``error_model``, ``zupt_sigma``, ``landmark_sigma``, ``nhc_sigma``,
     ``odometer_sigma``, the ``play_*`` settings (the play's distance per epoch is

@@ -80,17 +80,17 @@ class Record:
 class EpochBlock:
     """The nominal navigation of consecutive epochs ``first .. first + M - 1`` (the INS
     before that epoch's feedback): ``C`` ``(M, 3, 3)`` attitude ``C_b^n`` and ``vel``
-    ``(M, 3)`` NED velocity (m/s) at each epoch; with data also ``rows`` ``(M, 9)`` the INS's
-    navigation at the epochs (``strapdown.NAV``), ``C_m`` ``(M, 3, 3)`` the mid-interval
-    attitude, ``T`` ``(M,)`` (s) the intervals ending at the epochs (``None`` for the initial
-    epoch), ``start`` the INS's ``(lat, lon, h)`` (rad, rad, m) where the block's first
-    interval starts, ``nav`` the INS's navigation at every sample so far."""
+    ``(M, 3)`` NED velocity (m/s) at each epoch; with data also ``epoch_nav`` ``(M, 9)`` the
+    INS's navigation at the epochs (``strapdown.NAV``), ``C_m`` ``(M, 3, 3)`` the
+    mid-interval attitude, ``T`` ``(M,)`` (s) the intervals ending at the epochs (``None``
+    for the initial epoch), ``start`` the INS's ``(lat, lon, h)`` (rad, rad, m) where the
+    block's first interval starts, ``nav`` the INS's navigation at every sample so far."""
 
-    def __init__(self, model: Any, first: int, C: np.ndarray, vel: np.ndarray, *, rows: np.ndarray | None = None,
+    def __init__(self, model: Any, first: int, C: np.ndarray, vel: np.ndarray, *, epoch_nav: np.ndarray | None = None,
                  C_m: np.ndarray | None = None, T: np.ndarray | None = None, start: tuple | None = None,
                  nav: np.ndarray | None = None) -> None:
         self.model, self.first, self.C, self.vel = model, first, C, vel
-        self.rows, self.C_m, self.T, self.start, self.nav = rows, C_m, T, start, nav
+        self.epoch_nav, self.C_m, self.T, self.start, self.nav = epoch_nav, C_m, T, start, nav
 
     @cached_property
     def body_rows(self) -> np.ndarray:
@@ -221,7 +221,7 @@ class Odometer(Aiding):
         if block.T is None or self.distance is None:
             return
         first, M, T = block.first, block.T.size, block.T
-        pos = np.vstack((block.start, block.rows[:, :3]))
+        pos = np.vstack((block.start, block.epoch_nav[:, :3]))
         dr = ned_difference(pos[1:, 0], pos[1:, 1], pos[1:, 2], pos[:-1, 0], pos[:-1, 1], pos[:-1, 2])
         self.v_ins = np.einsum("ki,ki->k", block.C_m[:, :, 0], dr) / T
         self.v_odo = (self.distance[self.idx[first:first + M]] - self.distance[self.idx[first - 1:first - 1 + M]]) / T
