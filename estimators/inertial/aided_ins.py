@@ -64,7 +64,10 @@ terms). Only the epochs asked for are drawn, the chain's steps between them comp
 noise covariances summed through the ``C_k``), so the random numbers scale with the points
 wanted, not the epochs: 500 draws at 47 chord points of a 33 s run take 0.035 s.
 
-Measurements (the observer's ``measurements``; NaN or masked: absent):
+Measurements (the observer's ``measurements``; NaN or masked: absent). Each aiding is a
+measurement object of :mod:`railfmu.estimators.inertial.aiding` that gives its ``(z, H, R)``
+at an epoch, or nothing; the forward loop (and :func:`covariance_analysis`, with ``H, R``
+only) stacks what the active ones give, in the order below, into one Joseph update:
 
 * ``stopped`` (0/1): zero-velocity update ``z = v~^n``, ``H = [0 I 0]``, ``R = zupt_sigma^2 I`` at
   the epochs whose sample is stopped: every such epoch (``zupt_interval = 0``), the first of a
@@ -205,6 +208,19 @@ from typing import Any, ClassVar
 import numpy as np
 
 from railfmu.estimators.core import kalman
+from railfmu.estimators.inertial.aiding import (
+    AIDINGS,
+    EpochBlock,
+    Landmark,
+    Measurement,
+    Nhc,
+    Odometer,
+    Record,
+    Zupt,
+    aidings_from_record,
+    stack,
+    update_counts,
+)
 from railfmu.estimators.inertial.attitude import dcm_from_rph, perturb, rph_from_dcm
 from railfmu.estimators.inertial.ins_error_model import (
     DR,
@@ -213,7 +229,6 @@ from railfmu.estimators.inertial.ins_error_model import (
     ErrorModel,
     ImuGrade,
     corrected_position,
-    ned_difference,
     skews,
 )
 from railfmu.estimators.inertial.ins_observer import INCREMENTS
@@ -223,7 +238,8 @@ from railfmu.estimators.inertial.strapdown import NAV, Strapdown
 from railfmu.models import earth
 
 DEG = math.pi / 180.0
-MEASUREMENTS = ("stopped", "odometer", "landmark_latitude", "landmark_longitude", "landmark_height")
+#: the record's measurements: the aidings' columns ("stopped", "odometer", "landmark_*")
+MEASUREMENTS = tuple(c for cls in AIDINGS for c in cls.columns)
 SIGMAS = ("sigma_north", "sigma_east", "sigma_down")
 _GRADE_NAMES = tuple(f.name for f in fields(ImuGrade))
 #: KF epochs per block of the forward pass (feedback at the end of each)
@@ -607,8 +623,7 @@ class AidedInsSmoother(OfflineObserver, SmootherRecord):
     outputs: ClassVar[tuple[str, ...]] = (*NAV, *SIGMAS)
     units: ClassVar[dict[str, str]] = {
         **{k: "rad" for k in INCREMENTS[:3]}, **{k: "m/s" for k in INCREMENTS[3:]},
-        "stopped": "", "odometer": "m", "landmark_latitude": "rad", "landmark_longitude": "rad",
-        "landmark_height": "m",
+        **{k: u for cls in AIDINGS for k, u in cls.units.items()},
         "latitude": "rad", "longitude": "rad", "height": "m", "vn": "m/s", "ve": "m/s", "vd": "m/s",
         "roll": "rad", "pitch": "rad", "heading": "rad", **{k: "m" for k in SIGMAS}}
 
@@ -724,35 +739,22 @@ class AidedInsSmoother(OfflineObserver, SmootherRecord):
     def _forward(self, t, Z, U, mask, idx, zupt, store) -> float:
         """The forward filter with feedback (module docstring); returns the seconds spent in
         the strapdown. The epochs go in blocks of :data:`BLOCK`: the INS integrates a block in
-        one call, ``Phi``, ``Q`` and the measurement rows of its epochs are formed at once, the
-        covariance recursion and the updates loop over its epochs, and the navigation part of
+        one call, ``Phi``, ``Q`` of its epochs are formed at once and the aidings prepare theirs
+        (:class:`~railfmu.estimators.inertial.aiding.EpochBlock`), the covariance recursion and
+        the updates of the aidings that measure loop over its epochs, and the navigation part of
         the estimate is fed back at the block's end (open loop within one block: 1 s at the
         default epoch, where the linearisation error is ~|dx|^2, < 1e-9 of the error)."""
         s, model, dt = self.s, self.states, self.dt
-        n, N, n_samples = model.n, idx.size, t.shape[0]
+        n, N = model.n, idx.size
         Pm, Pp, Phi_s, Q_s, a_s, d_s, c_s, nav = (store[k] for k in ("Pm", "Pp", "Phi", "Q", "a", "d", "c", "nav"))
         ins = self._initial_ins(U[0])
         strap = 0.0
-        H_v, H_r = model.velocity_rows(), model.position_rows()
-        R_v = s["zupt_sigma"] ** 2 * np.eye(3)
-        R_r = s["landmark_sigma"] ** 2 * np.eye(3)
-        R_nhc = s["nhc_sigma"] ** 2 * np.eye(2)
-        R_odo = np.array([[s["odometer_sigma"] ** 2]])
-        fix_at = np.full(N, -1)  # the sample of the landmark fix an epoch uses
-        if s["landmarks"]:
-            present = mask[:, 2:5].all(axis=1)
-            new = present.copy()
-            new[1:] &= ~(present[:-1] & np.all(Z[1:, 2:5] == Z[:-1, 2:5], axis=1))  # a held fix is one fix
-            for j in np.flatnonzero(new):
-                fix_at[np.searchsorted(idx, j, side="left")] = j  # the last fix of a chunk wins
-        odo_ok = np.zeros(N, dtype=bool)
-        if s["odometer"]:
-            odo_ok[1:] = mask[idx[1:], 1] & mask[idx[:-1], 1]
-        counts = {"zupt_updates": 0, "nhc_updates": 0, "odometer_updates": 0, "landmark_updates": 0}
+        aidings = aidings_from_record(Record(s, model, Z, mask, self.measurements, idx, zupt))
+        counts = update_counts()
         nav[0] = ins.navigation()
         x = np.zeros(n)  # the filter's estimate relative to the fed-back INS
         P = model.initial_covariance(s)
-        feedback, nhc, odometer = s["feedback"], s["nhc"], s["odometer"]
+        feedback = s["feedback"]
         zero = np.zeros(n)
         k0 = -1  # the last epoch done
         while k0 < N - 1:
@@ -762,9 +764,8 @@ class AidedInsSmoother(OfflineObserver, SmootherRecord):
             if k0 < 0:  # epoch 0: the initial state, no prediction
                 rows = nav[:1].copy()
                 store["nominal"][0] = np.r_[lat0, h0, v0, 0.0, 0.0, -earth.gravity(lat0, h0), C0.ravel()]
-                C = C0[None]
+                block = EpochBlock(model, 0, C0[None], rows[:, 3:6], epoch_nav=rows, nav=nav)
                 Phi = Qd = None
-                first = 0
             else:
                 i0, i1 = int(idx[k0]), int(idx[k1])
                 ts = time.perf_counter()
@@ -784,18 +785,12 @@ class AidedInsSmoother(OfflineObserver, SmootherRecord):
                 C_m = 0.5 * (C + np.concatenate((C0[None], C[:-1])))
                 Phi, Qd = model.discretize(model.nav.system_matrices(lat_m, h_m, v_m, f_n, C_m), T, C_m, v_m)
                 Phi_s[k0:k1], Q_s[k0:k1] = Phi, Qd
-                first = k0 + 1
-                store["nominal"][first:k1 + 1] = np.column_stack((lat_m, h_m, v_m, f_n, C_m.reshape(-1, 9)))
-                if odometer:  # the INS's mean body-x speed over each epoch
-                    pos = np.vstack(((lat0, lon0, h0), rows[:, :3]))
-                    dr = ned_difference(pos[1:, 0], pos[1:, 1], pos[1:, 2], pos[:-1, 0], pos[:-1, 1], pos[:-1, 2])
-                    v_ins = np.einsum("ki,ki->k", C_m[:, :, 0], dr) / T
-                    v_odo = (Z[idx[first:k1 + 1], 1] - Z[idx[k0:k1], 1]) / T
-            vel = rows[:, 3:6]
-            if nhc or odometer:
-                Hb = model.body_velocity_rows(C, vel)
-                vb = np.einsum("kji,kj->ki", C, vel)
-            for j, k in enumerate(range(first, k1 + 1)):
+                store["nominal"][k0 + 1:k1 + 1] = np.column_stack((lat_m, h_m, v_m, f_n, C_m.reshape(-1, 9)))
+                block = EpochBlock(model, k0 + 1, C, rows[:, 3:6], epoch_nav=rows, C_m=C_m, T=T, start=(lat0, lon0, h0),
+                                   nav=nav)
+            for aiding in aidings:
+                aiding.prepare(block)
+            for j, k in enumerate(range(block.first, k1 + 1)):
                 if Phi is not None:
                     b = Phi[j] @ x
                     P = Phi[j] @ P @ Phi[j].T + Qd[j]
@@ -803,39 +798,14 @@ class AidedInsSmoother(OfflineObserver, SmootherRecord):
                 else:
                     b = x
                 Pm[k] = P
-                Hs, zs, Rs = [], [], []
-                if zupt[k]:
-                    Hs.append(H_v)
-                    zs.append(vel[j])
-                    Rs.append(R_v)
-                    counts["zupt_updates"] += 1
-                elif k > 0:
-                    if nhc:
-                        Hs.append(Hb[j, 1:])
-                        zs.append(vb[j, 1:])
-                        Rs.append(R_nhc)
-                        counts["nhc_updates"] += 1
-                    if odometer and odo_ok[k]:
-                        Hs.append(Hb[j, :1])
-                        zs.append(np.array([v_ins[j] - v_odo[j]]))
-                        Rs.append(R_odo)
-                        counts["odometer_updates"] += 1
-                if fix_at[k] >= 0:
-                    i = int(fix_at[k])
-                    zs.append(ned_difference(nav[i, 0], nav[i, 1], nav[i, 2], Z[i, 2], Z[i, 3], Z[i, 4]))
-                    Hs.append(H_r)
-                    Rs.append(R_r)
-                    counts["landmark_updates"] += 1
-                if Hs:
-                    if len(Hs) == 1:
-                        H, z, R = Hs[0], zs[0], Rs[0]
-                    else:
-                        H, z = np.vstack(Hs), np.concatenate(zs)
-                        R = np.zeros((z.size, z.size))
-                        o = 0
-                        for Ri in Rs:
-                            R[o:o + Ri.shape[0], o:o + Ri.shape[0]] = Ri
-                            o += Ri.shape[0]
+                got = []
+                for aiding in aidings:
+                    m = aiding.measure(j, k, block)
+                    if m is not None:
+                        got.append(m)
+                        counts[f"{aiding.name}_updates"] += 1
+                if got:
+                    z, H, R = stack(got)
                     upd = kalman.update(b, P, z, H, R)
                     x, P = upd.x, upd.P
                 else:
@@ -926,7 +896,8 @@ def covariance_analysis(times, f_n, C_bn, latitude, velocity, zupt, position=Non
                         odometer=None, **settings: Any) -> CovarianceAnalysis:
     r"""The filter's and the smoother's covariance recursions on a given nominal trajectory,
     without data (Jiang et al. (2017), §5): the same error model, ``Phi``/``Q`` sampling,
-    Joseph updates and RTS covariance pass as :class:`AidedInsSmoother`.
+    aidings (the objects of :mod:`railfmu.estimators.inertial.aiding` on the given epoch masks,
+    their ``(H, R)`` only), Joseph updates and RTS covariance pass as :class:`AidedInsSmoother`.
 
     ``times`` ``(N,)`` (s): the epochs; per epoch ``k`` the nominal over the interval that ends
     at ``t_k`` (row 0 unused but for the shape): ``f_n`` ``(N, 3)`` specific force (NED, m/s2),
@@ -934,7 +905,8 @@ def covariance_analysis(times, f_n, C_bn, latitude, velocity, zupt, position=Non
     ``height`` (m) (each may be one value for all epochs); ``zupt`` ``(N,)`` bool: a
     zero-velocity update at the epoch; ``position``, ``nhc``, ``odometer`` ``(N,)`` bool or None:
     a landmark position update, the non-holonomic constraint, the odometer speed at the epoch
-    (their rows from ``C_bn`` and ``velocity``, as the filter's at the end of the interval).
+    (their rows from ``C_bn`` and ``velocity``, as the filter's at the end of the interval;
+    the masks as given: unlike the filter's, an NHC or odometer epoch may also have a ZUPT).
     ``settings``: those of :class:`AidedInsSmoother` that concern the covariances (the grade,
     the P0 sigmas, ``error_model``, ``zupt_sigma``, ``landmark_sigma``, ``nhc_sigma``,
     ``odometer_sigma``, the ``play_*`` settings (the play's distance per epoch is
@@ -964,8 +936,9 @@ def covariance_analysis(times, f_n, C_bn, latitude, velocity, zupt, position=Non
               "C": (max(N - 1, 0), n, n), "Ps": (N, n, n), "a": (N, n), "d": (N, n), "s": (N, n)}
     store = _Store(shapes, s["memory_budget_mb"] * 1e6)
     P = model.initial_covariance(s)
-    H_v, H_r = model.velocity_rows(), model.position_rows()
-    R_v = s["zupt_sigma"] ** 2 * np.eye(3)  # the filter's very matrix: equal covariances to the bit
+    # the filter's aidings without data: only their (H, R) at the given epochs
+    aidings = [Zupt(zupt, s["zupt_sigma"], model), Nhc(nhc, s["nhc_sigma"]), Odometer(odo, s["odometer_sigma"]),
+               Landmark(pos, s["landmark_sigma"], model)]
     for a in range(1, N, 512):  # Phi, Q of the epochs in blocks (bounded temporaries)
         b = min(a + 512, N)
         A = model.nav.system_matrices(lat[a:b], hgt[a:b], vel[a:b], f_n[a:b], C_bn[a:b])
@@ -978,24 +951,12 @@ def covariance_analysis(times, f_n, C_bn, latitude, velocity, zupt, position=Non
             P = Phi @ P @ Phi.T + Qd
             P = 0.5 * (P + P.T)
         store["Pm"][k] = P
-        Hs, Rs = [], []
-        if zupt[k]:
-            Hs.append(H_v)
-            Rs += [s["zupt_sigma"] ** 2] * 3
-        if nhc[k] or odo[k]:
-            Hb = model.body_velocity_rows(C_bn[k:k + 1], vel[k:k + 1])[0]
-            if nhc[k]:
-                Hs.append(Hb[1:])
-                Rs += [s["nhc_sigma"] ** 2] * 2
-            if odo[k]:
-                Hs.append(Hb[:1])
-                Rs.append(s["odometer_sigma"] ** 2)
-        if pos[k]:
-            Hs.append(H_r)
-            Rs += [s["landmark_sigma"] ** 2] * 3
-        if Hs:
-            H, R = (Hs[0], R_v) if len(Hs) == 1 and zupt[k] else (np.vstack(Hs), np.diag(Rs))
-            P = kalman.update(zero, P, np.zeros(H.shape[0]), H, R).P
+        block = EpochBlock(model, k, C_bn[k:k + 1], vel[k:k + 1])  # the body rows from the epoch's nominal
+        got = [Measurement(np.zeros(r[0].shape[0]), *r) for r in (a.rows(0, k, block) for a in aidings)
+               if r is not None]
+        if got:
+            z, H, R = stack(got)
+            P = kalman.update(zero, P, z, H, R).P
         store["Pp"][k] = P
     _smooth(store)
     return CovarianceAnalysis(times, store, model.names)
