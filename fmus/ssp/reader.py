@@ -608,7 +608,7 @@ class _Reader:
             if comp is None:
                 first = next(iter(values), "?")
                 raise UserError(f"--set {cname}.{first}: no component {cname!r}"
-                                f"{_closest(cname, list(self.comps))}; {self.known()}")
+                                f"{_closest(cname, [*self.comps, *self.observers])}; {self.known()}")
             for name, value in values.items():
                 where = f"--set {cname}.{name}"
                 var = self._settable(comp, name, where)
@@ -844,9 +844,9 @@ class _Reader:
 
 
 def _closest(name: str, names: list[str]) -> str:
-    """``; did you mean 'a' or 'b'?`` for the names closest to a mistyped one (difflib), else ''."""
+    """`` (did you mean 'a' or 'b'?)`` for the names closest to a mistyped one (difflib), else ''."""
     close = difflib.get_close_matches(name, names, n=3, cutoff=0.6)
-    return f"; did you mean {' or '.join(map(repr, close))}?" if close else ""
+    return f" (did you mean {' or '.join(map(repr, close))}?)" if close else ""
 
 
 def _setting(text: str) -> Value:
