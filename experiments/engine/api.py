@@ -26,7 +26,7 @@ from railfmu.experiments.engine.studies import experiment_names, register_study 
 __all__ = ["Parameter", "Run", "export", "list_experiments", "parameters", "read_ssp", "register_study", "run",
            "study"]
 
-Experiment = str | os.PathLike  # a name of `railfmu list`, or the path of an .ssp, .ssd or folder
+ExperimentRef = str | os.PathLike  # a name of `railfmu list`, or the path of an .ssp, .ssd or folder
 
 
 def _sets(parameters: Mapping[str, Any] | None) -> dict[str, dict[str, Any]]:
@@ -40,7 +40,7 @@ def _sets(parameters: Mapping[str, Any] | None) -> dict[str, dict[str, Any]]:
     return out
 
 
-def run(experiment: Experiment, variant: str | None = None, *, parameters: Mapping[str, Any] | None = None,
+def run(experiment: ExperimentRef, variant: str | None = None, *, parameters: Mapping[str, Any] | None = None,
         seed: int | None = None, master: str | None = None, stop_time: float | None = None,
         step_size: float | None = None, out: str | os.PathLike | None = None, progress: bool = False,
         log: TextIO | None = None, verbose: bool = False) -> Run:
@@ -99,7 +99,7 @@ def run(experiment: Experiment, variant: str | None = None, *, parameters: Mappi
     return r
 
 
-def study(experiment: Experiment, variants: list[str] | None = None, *, runs: int = 1, seed: int | None = None,
+def study(experiment: ExperimentRef, variants: list[str] | None = None, *, runs: int = 1, seed: int | None = None,
           parameters: Mapping[str, Any] | None = None, master: str | None = None, stop_time: float | None = None,
           step_size: float | None = None, out: str | os.PathLike | None = None, scheduler: str | None = None,
           workers: int | None = None, keep_runs: bool = False, log: TextIO | None = None) -> dict:
@@ -141,7 +141,7 @@ def study(experiment: Experiment, variants: list[str] | None = None, *, runs: in
                      stop_time=stop_time, step_size=step_size)
 
 
-def read_ssp(experiment: Experiment, variant: str | None = None, *, parameters: Mapping[str, Any] | None = None,
+def read_ssp(experiment: ExperimentRef, variant: str | None = None, *, parameters: Mapping[str, Any] | None = None,
              seed: int | None = None, stop_time: float | None = None, step_size: float | None = None):
     """The resolved system of an experiment or SSP, its FMUs built, without running it.
 
@@ -160,7 +160,7 @@ def read_ssp(experiment: Experiment, variant: str | None = None, *, parameters: 
     return load_system(exp, variant or exp.default_variant, _sets(parameters), seed, stop_time, step_size)
 
 
-def export(experiment: Experiment, path: str | os.PathLike, variant: str | None = None, *,
+def export(experiment: ExperimentRef, path: str | os.PathLike, variant: str | None = None, *,
            parameters: Mapping[str, Any] | None = None, seed: int | None = None, stop_time: float | None = None,
            step_size: float | None = None) -> Path:
     """Write one variant as a self-contained ``.ssp`` (SSD, final parameters, FMUs).
@@ -184,7 +184,7 @@ def export(experiment: Experiment, path: str | os.PathLike, variant: str | None 
                          step_size=step_size)[0]
 
 
-def export_system(experiment: Experiment, path: str | os.PathLike, variant: str | None = None,
+def export_system(experiment: ExperimentRef, path: str | os.PathLike, variant: str | None = None,
                   **options) -> tuple[Path, Any]:
     """:func:`export`, returning the archive's path and the system written (for the CLI's line)."""
     from railfmu.fmus.ssp import write_ssp
@@ -198,7 +198,7 @@ def export_system(experiment: Experiment, path: str | os.PathLike, variant: str 
     return write_ssp(system, out), system
 
 
-def parameters(experiment: Experiment, variant: str | None = None) -> list[Parameter]:
+def parameters(experiment: ExperimentRef, variant: str | None = None) -> list[Parameter]:
     """What ``parameters`` of :func:`run` (``--set``) can change, with units and defaults.
 
     Parameters

@@ -19,7 +19,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TextIO
 
-import numpy as np
 
 from railfmu.estimators.track.metrics import rms
 from railfmu.models.errors import UserError
