@@ -12,9 +12,9 @@ import numpy as np
 
 from railfmu.experiments.engine.study_protocol import RunData
 
-if TYPE_CHECKING:  # typing only: the runner imports this module
+if TYPE_CHECKING:  # typing only
     from railfmu.experiments.engine.observer_bank import ObserverBank
-    from railfmu.experiments.engine.runner import Experiment
+    from railfmu.experiments.engine.studies import Experiment
     from railfmu.fmus.cosim.system import System
 
 #: metrics that differ between two identical runs (wall clock)

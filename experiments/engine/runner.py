@@ -15,7 +15,6 @@ import sys
 import time
 import warnings as _warnings
 from collections.abc import Callable
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TextIO
 
@@ -24,34 +23,13 @@ from railfmu.estimators.track.metrics import rms
 from railfmu.models.errors import UserError
 
 from railfmu.experiments.engine.result import Run, json_default as _json_default
-from railfmu.experiments.engine.studies import HERE, experiment_names, study_named, study_names
+from railfmu.experiments.engine.studies import HERE, Experiment, experiment_names, study_named, study_names
 from railfmu.experiments.engine.study_protocol import RunData, Study
 
 __all__ = ["Experiment", "experiment_names", "find_experiment", "load_system", "execute", "run_experiment",
            "HERE", "_json_default"]
 
 DEFAULT_MASTER = "jacobi"  # when neither the command line nor the experiment (rf:FixedStep master=) names one
-
-
-@dataclass
-class Experiment:
-    name: str
-    path: Path  # folder, .ssd or .ssp
-    study: Study = field(default_factory=Study)
-    variants: list[str] = field(default_factory=list)
-    packaged: bool = False  # a folder of experiments/ (workers find it by name)
-    warnings: list[str] = field(default_factory=list)  # why it runs with the plain Study()
-    study_name: str | None = None  # the study the SSD names (org.railfmu.study), when registered
-
-    @property
-    def default_variant(self) -> str | None:
-        # the study's, where this SSP has it (an exported .ssp has no variants: it runs as it is)
-        dv = self.study.default_variant
-        return dv if dv in self.variants else None
-
-    @property
-    def description(self) -> str:
-        return self.study.description or self.name
 
 
 def find_experiment(name: str | Path) -> Experiment:

@@ -11,6 +11,7 @@ called. Known names: those given to :func:`register_study`, each experiment pack
 from __future__ import annotations
 
 import importlib
+from dataclasses import dataclass, field
 from importlib.metadata import entry_points
 from pathlib import Path
 
@@ -52,3 +53,26 @@ def study_named(name: str) -> Study | None:
         study = ep.load()
     _REGISTERED[name] = study
     return study
+
+
+@dataclass
+class Experiment:
+    """An experiment found by name or path (:func:`railfmu.experiments.engine.runner.find_experiment`)
+    with the study its SSD names."""
+    name: str
+    path: Path  # folder, .ssd or .ssp
+    study: Study = field(default_factory=Study)
+    variants: list[str] = field(default_factory=list)
+    packaged: bool = False  # a folder of experiments/ (workers find it by name)
+    warnings: list[str] = field(default_factory=list)  # why it runs with the plain Study()
+    study_name: str | None = None  # the study the SSD names (org.railfmu.study), when registered
+
+    @property
+    def default_variant(self) -> str | None:
+        # the study's, where this SSP has it (an exported .ssp has no variants: it runs as it is)
+        dv = self.study.default_variant
+        return dv if dv in self.variants else None
+
+    @property
+    def description(self) -> str:
+        return self.study.description or self.name
