@@ -37,4 +37,5 @@ if len(sys.argv) > 1:
     ax.plot(r.estimates["alignment"]["time"], 1e3 * xi_hat, label="Kalman filter estimate", lw=0.8)
     ax.set(xlabel="time [s]", ylabel="[mm]")
     ax.legend()
+    fig.tight_layout()
     fig.savefig(out / "quickstart.png", dpi=100)

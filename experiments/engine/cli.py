@@ -1,9 +1,11 @@
-"""railfmu command line (contract in docs/architecture.md, "Command line").
+"""railfmu command line (contract in docs/architecture.md, "Command line"): a thin layer over
+the Python API (:mod:`railfmu.experiments.engine.api`, re-exported as ``railfmu.run`` & co.).
 
 Every user error (missing file, bad parameter, bad --set) is one line on stderr and exit
 code 2; no traceback. Without ``--master``, ``run`` and ``study`` use the master the
 experiment prefers (``<rf:FixedStep stepSize="..." master="container"/>`` in its SSD's
-``org.railfmu.experiment`` annotation), else jacobi.
+``org.railfmu.experiment`` annotation), else jacobi. ``-q`` drops progress lines (warnings and
+errors stay), ``-v`` adds detail; both go before or after the subcommand.
 """
 
 from __future__ import annotations

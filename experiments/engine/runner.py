@@ -10,6 +10,7 @@ every observer's raw error reported.
 
 from __future__ import annotations
 
+import difflib
 import math
 import sys
 import time
@@ -46,7 +47,9 @@ def find_experiment(name: str | Path) -> Experiment:
         exp = Experiment(label or path.stem, path)
     else:
         known = ", ".join(experiment_names())
-        raise UserError(f"unknown experiment {str(name)!r}; known: {known} (or give the path of an .ssp/.ssd)")
+        close = difflib.get_close_matches(str(name), experiment_names(), n=1)
+        hint = f" (did you mean {close[0]!r}?)" if close else ""
+        raise UserError(f"unknown experiment {str(name)!r}{hint}; known: {known} (or give the path of an .ssp/.ssd)")
     exp.variants = list_variants(exp.path)
     exp.study, exp.study_name, exp.warnings = _study_of(exp.path)
     return exp
@@ -74,7 +77,9 @@ def load_system(exp: Experiment, variant: str | None, sets: dict | None = None, 
     from railfmu.fmus.ssp import read_system
 
     if variant is not None and variant not in exp.variants:
-        raise UserError(f"experiment {exp.name}: unknown variant {variant!r}; "
+        close = difflib.get_close_matches(variant, exp.variants, n=1)
+        hint = f" (did you mean {close[0]!r}?)" if close else ""
+        raise UserError(f"experiment {exp.name}: unknown variant {variant!r}{hint}; "
                         f"known: {', '.join(exp.variants) or '(none)'}")
     for flag, value in (("--stop-time", stop_time), ("--step-size", step_size)):
         if value is not None and not (value > 0 and math.isfinite(value)):
