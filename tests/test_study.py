@@ -144,14 +144,24 @@ def test_monte_carlo_keep_runs_writes_each_member(tmp_path):
         assert (out / "harmonic" / f"seed_{seed}" / "report.md").is_file()
 
 
-def test_an_ssp_given_by_path_gets_the_default_study(tmp_path):
+def test_an_ssp_given_by_path_gets_the_default_study_when_its_ssd_names_none(tmp_path):
     exp = tmp_path / "exp"
     shutil.copytree(EXPERIMENTS / "track_wheelset", exp, ignore=shutil.ignore_patterns("*.py", "__pycache__"))
+    ssd = exp / "SystemStructure.ssd"
+    text = ssd.read_text()
+    start = text.index('<ssc:Annotation type="org.railfmu.study">')
+    ssd.write_text(text[:start] + text[text.index("</ssc:Annotation>", start) + len("</ssc:Annotation>"):])
     out = tmp_path / "run"
     res = railfmu("run", str(exp), "--stop-time", "0.3", "--out", str(out))
     assert res.returncode == 0, res.stderr
+    assert "railfmu: warning: " in res.stderr and "names no study" in res.stderr
     report = (out / "report.md").read_text()
     assert "## Observer `alignment`: raw estimate against its truth" in report
     assert "| xi |" in report and "rms error of the raw estimate" in report
     assert (out / "signals.png").is_file() and (out / "estimates_alignment.png").is_file()
     assert not (out / "track_input.png").exists()  # the package's figures belong to its study
+    # the SSD as shipped names its study: a copy keeps its figures, whatever the folder's name
+    shutil.copy(EXPERIMENTS / "track_wheelset" / "SystemStructure.ssd", ssd)
+    res = railfmu("run", str(exp), "--stop-time", "0.3", "--out", str(tmp_path / "named"))
+    assert res.returncode == 0 and "warning" not in res.stderr, res.stderr
+    assert (tmp_path / "named" / "track_input.png").is_file()

@@ -1,9 +1,11 @@
-"""railfmu command line (contract in docs/architecture.md, "Command line").
+"""railfmu command line (contract in docs/architecture.md, "Command line"): a thin layer over
+the Python API (:mod:`railfmu.experiments.engine.api`, re-exported as ``railfmu.run`` & co.).
 
 Every user error (missing file, bad parameter, bad --set) is one line on stderr and exit
 code 2; no traceback. Without ``--master``, ``run`` and ``study`` use the master the
 experiment prefers (``<rf:FixedStep stepSize="..." master="container"/>`` in its SSD's
-``org.railfmu.experiment`` annotation), else jacobi.
+``org.railfmu.experiment`` annotation), else jacobi. ``-q`` drops progress lines (warnings and
+errors stay), ``-v`` adds detail; both go before or after the subcommand.
 """
 
 from __future__ import annotations
@@ -68,64 +70,106 @@ def cmd_validate(args) -> int:
 
 
 def cmd_list(args) -> int:
-    from railfmu.experiments.engine.runner import experiment_names, find_experiment
+    from railfmu.experiments.engine.api import list_experiments
 
-    for name in experiment_names():
-        exp = find_experiment(name)
-        print(f"{name}: {exp.description}")
-        for v in exp.variants:
-            print(f"  {v}{' (default)' if v == exp.default_variant else ''}")
+    for name, exp in list_experiments().items():
+        print(f"{name}: {exp['description']}")
+        for v in exp["variants"]:
+            print(f"  {v}{' (default)' if v == exp['default_variant'] else ''}")
     return 0
 
 
-def _parse_set(items: list[str]) -> dict[str, dict[str, str]]:
-    out: dict[str, dict[str, str]] = {}
+def _parse_set(items: list[str]) -> dict[str, str]:
+    """``--set C.P=V`` items -> ``{"C.P": "V"}`` (text: the reader converts it to the variable's FMI type)."""
+    out: dict[str, str] = {}
     for item in items:
         key, sep, value = item.partition("=")
         comp, dot, param = key.partition(".")
         if not sep or not dot or not comp or not param or not value:
             raise UserError(f"--set {item!r}: expected COMPONENT.PARAM=VALUE")
-        out.setdefault(comp, {})[param] = value  # text: converted to the variable's FMI type by the reader
+        out[key] = value
     return out
 
 
 def _overrides(args) -> dict:
-    return {"sets": _parse_set(args.set or []), "seed": args.seed, "stop_time": args.stop_time,
+    return {"parameters": _parse_set(args.set or []), "seed": args.seed, "stop_time": args.stop_time,
             "step_size": args.step_size}
 
 
-def cmd_run(args) -> int:
-    from railfmu.experiments.engine.runner import run_experiment
+def _log(args):
+    """Where progress lines go: stderr, none with -q (warnings and errors still do)."""
+    return None if args.quiet else sys.stderr
 
-    run_experiment(args.experiment, args.variant, args.out, master=args.master, **_overrides(args))
+
+def cmd_run(args) -> int:
+    from railfmu.experiments.engine.api import run
+    from railfmu.experiments.engine.runner import find_experiment
+
+    out = args.out
+    if out is None:  # out/EXP/VARIANT, as before the API
+        exp = find_experiment(args.experiment)
+        out = Path("out") / exp.name / (args.variant or exp.default_variant or "default")
+    log = _log(args)
+    run(args.experiment, args.variant, master=args.master, out=out, progress=not args.quiet,
+        log=log if log is not None else _Quiet(), verbose=args.verbose, **_overrides(args))
     return 0
 
 
-def cmd_study(args) -> int:
-    from railfmu.experiments.engine.study import run_study
+class _Quiet:
+    """A log that drops progress lines but lets warnings (``railfmu: ...``) through to stderr."""
 
-    run_study(args.experiment, args.out, scheduler=args.scheduler, master=args.master,
-              workers=args.workers, variants=args.variant, runs=args.runs, keep_runs=args.keep_runs,
-              **_overrides(args))
+    def write(self, text: str) -> int:
+        if text.startswith("railfmu: "):
+            sys.stderr.write(text + ("" if text.endswith("\n") else "\n"))
+        return len(text)
+
+    def flush(self) -> None:
+        sys.stderr.flush()
+
+
+def cmd_study(args) -> int:
+    from railfmu.experiments.engine.api import study
+
+    study(args.experiment, args.variant, out=args.out, scheduler=args.scheduler, master=args.master,
+          workers=args.workers, runs=args.runs, keep_runs=args.keep_runs,
+          log=_log(args) or _Quiet(), **_overrides(args))
     return 0
 
 
 def cmd_export(args) -> int:
-    from railfmu.fmus.ssp import write_ssp
-
-    from railfmu.experiments.engine.runner import find_experiment, load_system
+    from railfmu.experiments.engine.api import export_system
+    from railfmu.experiments.engine.runner import find_experiment
 
     exp = find_experiment(args.experiment)
-    system = load_system(exp, args.variant or exp.default_variant, **_overrides(args))
-    out = Path(args.output)
-    if out.suffix != ".ssp":
-        raise UserError(f"-o {out}: the archive name must end in .ssp")
-    if out.is_dir():
-        raise UserError(f"-o {out}: a folder of that name exists; give a file name")
-    write_ssp(system, out)
+    out, system = export_system(args.experiment, args.output, args.variant, **_overrides(args))
     print(f"wrote {out} ({exp.name}/{args.variant or exp.default_variant}, "
           f"{len(system.components)} FMUs inside)")
     return 0
+
+
+def cmd_parameters(args) -> int:
+    from railfmu.experiments.engine.api import parameters
+    from railfmu.experiments.engine.runner import find_experiment
+
+    exp = find_experiment(args.experiment)
+    params = parameters(args.experiment, args.variant)
+    variant = args.variant or exp.default_variant
+    print(f"{exp.name}, {f'variant {variant}' if variant else 'no variant'}: {len(params)} settable names "
+          "(--set NAME=VALUE)")
+    rows = [(p.name, p.type, p.unit or "-", _show(p.value),
+             "" if p.kind == "setting" or p.value == p.default else f"(default {_show(p.default)})",
+             p.description if args.verbose else "") for p in params]
+    widths = [max((len(r[i]) for r in rows), default=0) for i in range(4)]
+    print(f"  {'name':<{widths[0]}}  {'type':<{widths[1]}}  {'unit':<{widths[2]}}  value")
+    for r in rows:
+        print(("  " + "  ".join(f"{c:<{w}}" for c, w in zip(r[:4], widths)) + "  "
+               + "  ".join(c for c in r[4:] if c)).rstrip())
+    return 0
+
+
+def _show(value) -> str:
+    return repr(value) if isinstance(value, str) else "true" if value is True else "false" if value is False \
+        else f"{value:g}" if isinstance(value, float) else str(value)
 
 
 def _add_overrides(p) -> None:
@@ -150,8 +194,35 @@ class _Parser(argparse.ArgumentParser):
         sys.exit(2)
 
 
+def _version() -> str:
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("railfmu")
+    except PackageNotFoundError:  # a checkout that was never installed
+        return "0+unknown"
+
+
+def _verbosity(defaults: bool) -> argparse.ArgumentParser:
+    """-q/-v, accepted before and after the subcommand (the subcommand's copy must not reset
+    what was given before it: no defaults there)."""
+    p = argparse.ArgumentParser(add_help=False)
+    d = {} if defaults else {"default": argparse.SUPPRESS}
+    g = p.add_mutually_exclusive_group()
+    g.add_argument("-q", "--quiet", action="store_true", help="no progress lines (warnings and errors stay)", **d)
+    g.add_argument("-v", "--verbose", action="store_true", help="more detail (study, components, timing)", **d)
+    return p
+
+
+class _SubParsers(argparse._SubParsersAction):
+    def add_parser(self, name, **kwargs):  # every subcommand takes -q/-v too
+        return super().add_parser(name, parents=[_verbosity(False)], **kwargs)
+
+
 def main(argv: list[str] | None = None) -> int:
-    ap = _Parser(prog="railfmu", description=__doc__.splitlines()[0])
+    ap = _Parser(prog="railfmu", description=__doc__.splitlines()[0], parents=[_verbosity(True)])
+    ap.add_argument("--version", action="version", version=f"railfmu {_version()}")
+    ap.register("action", "parsers", _SubParsers)
     sub = ap.add_subparsers(dest="command", required=True)
     p = sub.add_parser("build", help="compile all FMUs")
     p.add_argument("--out", default=None, help="output folder (default: the per-user cache, ~/.cache/railfmu/fmus/KEY)")
@@ -183,6 +254,10 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--master", default=None, help=MASTER_HELP)
     _add_overrides(p)
     p.set_defaults(fn=cmd_study)
+    p = sub.add_parser("parameters", help="what --set can change in an experiment: units, defaults, values")
+    p.add_argument("experiment")
+    p.add_argument("--variant")
+    p.set_defaults(fn=cmd_parameters)
     p = sub.add_parser("export", help="a self-contained .ssp (SSD + parameters + FMUs) of one variant")
     p.add_argument("experiment")
     p.add_argument("--variant")
@@ -202,6 +277,9 @@ def main(argv: list[str] | None = None) -> int:
     except BuildError as exc:  # our generated C or the machine's compiler: not the user's input
         print(f"railfmu: build failed: {exc}", file=sys.stderr)
         return 1
+    except BrokenPipeError:  # `railfmu list | head`: the reader left; not an error of ours
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 0
     except KeyboardInterrupt:
         print("railfmu: interrupted (complete rows written so far stay in the output folder)",
               file=sys.stderr)

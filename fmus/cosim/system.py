@@ -145,6 +145,7 @@ class System:
     step_size_from: str = "given"  # where the step size came from (annotation, --step-size, the FMUs)
     master: str | None = None  # the master the experiment prefers (rf:FixedStep master=); None: the caller's
     stop_time_from: str = "given"  # where the stop time came from (--stop-time, the variant, the SSD)
+    study: str | None = None  # the study it names (org.railfmu.study annotation); None: plain SSP
 
     def component(self, name: str) -> Component:
         for c in self.components:

@@ -32,6 +32,7 @@ Helpers: ``ssp_xml`` (files, XML, schemas), ``ssp_units`` (unit algebra), ``ssp_
 
 from __future__ import annotations
 
+import difflib
 import math
 import zipfile
 from dataclasses import dataclass, field
@@ -86,7 +87,7 @@ from railfmu.fmus.cosim.system import (
     read_model,
 )
 
-__all__ = ["list_variants", "read_system", "validate_ssp", "write_ssp"]
+__all__ = ["list_variants", "read_system", "study_name", "validate_ssp", "write_ssp"]
 
 FMU_TYPE = "application/x-fmu-sharedlibrary"
 PARAMETER_SET = "application/x-ssp-parameter-set"
@@ -94,6 +95,8 @@ RESOURCES = "resources/"  # SSP 1.0: an SSP's own files (FMUs, and any file a pa
 PARAMETERS = "org.railfmu.parameters"
 RECORDER, OBSERVERS, EXPERIMENT, OSP = ("org.railfmu.recorder", "org.railfmu.observers",
                                         "org.railfmu.experiment", "com.opensimulationplatform")
+#: the study whose metrics and figures a run gets: ``<rf:Study name="..."/>`` (System.study)
+STUDY = "org.railfmu.study"
 #: reserved name of a variant parameter (or ``--set``) giving the run's stop time in s
 STOP_TIME = "experiment.stopTime"
 
@@ -114,6 +117,20 @@ def read_system(path, variant: str | None = None, fmu_dirs=(), overrides: dict[s
                         f"{one_line(exc)})") from None
     system.source = Path(path)
     return system
+
+
+def study_name(path) -> str | None:
+    """The study an SSP names (our ``org.railfmu.study`` annotation, ``<rf:Study name=...>``),
+    or None; reads the SSD only, without FMUs or schema."""
+    root = locate(path)
+    system = parse_xml(root.ssd, root.show(root.ssd)).find("ssd:System", NS)
+    return _study(system) if system is not None else None
+
+
+def _study(system_el) -> str | None:
+    a = _Reader._annotation(system_el, STUDY)
+    el = a.find("rf:Study", NS) if a is not None else None
+    return (el.get("name") or None) if el is not None else None
 
 
 def list_variants(path) -> list[str]:
@@ -221,7 +238,7 @@ class _Reader:
                         record=record, observers=observers,
                         description=self.doc.get("description") or self.system.get("description") or "",
                         warnings=self._unconnected(connections), step_size_from=self.step_from,
-                        master=self._master(), stop_time_from=self.stop_from)
+                        master=self._master(), stop_time_from=self.stop_from, study=_study(self.system))
         try:  # what every master checks, so that `railfmu validate` reports what a run would refuse
             check_system(system)
         except UserError as exc:
@@ -434,7 +451,8 @@ class _Reader:
     def _settable(self, comp: _Comp, name: str, where: str):
         var = comp.vars.get(name)
         if var is None:
-            raise UserError(f"{where}: {comp.fmu.name} has no variable {name!r}")
+            settable = [n for n, v in comp.vars.items() if not why_not_settable(v)]
+            raise UserError(f"{where}: {comp.fmu.name} has no variable {name!r}{_closest(name, settable)}")
         why = why_not_settable(var)
         if why:
             raise UserError(f"{where}: {comp.fmu.name} variable {name!r} {why}; it cannot be set")
@@ -589,7 +607,8 @@ class _Reader:
             comp = self.comps.get(cname)
             if comp is None:
                 first = next(iter(values), "?")
-                raise UserError(f"--set {cname}.{first}: no component {cname!r}; {self.known()}")
+                raise UserError(f"--set {cname}.{first}: no component {cname!r}"
+                                f"{_closest(cname, [*self.comps, *self.observers])}; {self.known()}")
             for name, value in values.items():
                 where = f"--set {cname}.{name}"
                 var = self._settable(comp, name, where)
@@ -822,6 +841,12 @@ class _Reader:
                     out.append(f"{comp.name}.{var.name}: input not connected; keeps its start value "
                                f"{_show(var.start)}")
         return out
+
+
+def _closest(name: str, names: list[str]) -> str:
+    """`` (did you mean 'a' or 'b'?)`` for the names closest to a mistyped one (difflib), else ''."""
+    close = difflib.get_close_matches(name, names, n=3, cutoff=0.6)
+    return f" (did you mean {' or '.join(map(repr, close))}?)" if close else ""
 
 
 def _setting(text: str) -> Value:

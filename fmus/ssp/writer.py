@@ -284,6 +284,8 @@ def _system_annotations(sys_el, system: System) -> None:
                     _sub(el, "rf:Setting", name=k, value=str(v).lower() if isinstance(v, bool) else str(v))
             for k, ref in o.setting_signals.items():
                 _sub(el, "rf:Setting", name=k, connector=ref)
+    if system.study:  # a copied or exported experiment keeps its study's metrics and figures
+        _sub(_sub(annotations, "ssc:Annotation", type="org.railfmu.study"), "rf:Study", name=system.study)
     if system.record:
         recorder = _sub(_sub(annotations, "ssc:Annotation", type="org.railfmu.recorder"), "rf:Recorder")
         for ref in system.record:
