@@ -70,16 +70,19 @@ def test_runs_from_a_folder_with_its_own_models_package(installed, tmp_path):
     (tmp_path / "models.py").write_text("raise ImportError('the user module was imported')\n")
     (tmp_path / "estimators").mkdir()
     (tmp_path / "estimators" / "__init__.py").write_text("raise ImportError('the user package was imported')\n")
-    script = ("import json, railfmu, railfmu.models, railfmu.estimators.track.alignment\n"
-              "from railfmu.experiments.engine.runner import experiment_names\n"
+    script = ("import json, railfmu, railfmu.models\n"
+              "r = railfmu.run('track_wheelset', stop_time=2.0)\n"
+              "y = r.signals['wheelset.y']\n"
               "print(json.dumps({'file': railfmu.models.__file__, 'version': railfmu.__version__,"
-              " 'experiments': experiment_names()}))\n")
+              " 'experiments': sorted(railfmu.list_experiments()), 'n': len(y),"
+              " 'finite': bool(abs(y).max() < 1.0)}))\n")
     res = subprocess.run([str(python), "-c", script], cwd=tmp_path, capture_output=True, text=True)
     assert res.returncode == 0, res.stderr
     info = json.loads(res.stdout)
     assert "site-packages" in info["file"] and str(ROOT) not in info["file"]
     assert info["version"] != "0+unknown"
     assert {"lateral_alignment", "track_wheelset", "trolley_survey"} <= set(info["experiments"])
+    assert info["n"] == 2001 and info["finite"]  # 2 s at the SSD's 1 ms step, a lateral motion well under 1 m
 
 
 def test_the_installed_lateral_alignment_report_equals_the_editable_one(installed, tmp_path, fmu_dir):
