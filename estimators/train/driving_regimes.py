@@ -111,7 +111,7 @@ speeds it spans.
 from __future__ import annotations
 
 import math
-from typing import Mapping, Sequence
+from typing import Callable, Mapping, Sequence
 
 import numpy as np
 
@@ -399,17 +399,20 @@ def feature_errors(feats: Mapping, truth: Mapping) -> dict:
 
 
 def score(fix_time, speed, acceleration, effort, time, true_speed, true_effort, style: Mapping,
-          train: Mapping, recogniser_name: str = "paper") -> tuple[dict, dict]:
+          train: Mapping, recognise_fn: Callable | None = None) -> tuple[dict, dict]:
     """One estimator on one simulated run, as the study records it: ``(metrics, features)``.
 
     ``fix_time``, ``speed``, ``acceleration``, ``effort``: the estimator's outputs at the GNSS
     fixes (rows where the receiver's ``valid`` is set; effort and acceleration of the interval
     ending at each fix). ``time``, ``true_speed``, ``true_effort``: the driver's grid as the
     Jacobi master records it (``train.v``, ``train.effort_specific``). ``style``, ``train``:
-    as :func:`feature_truth`; ``recogniser_name`` the estimator's recogniser (:func:`recogniser`).
+    as :func:`feature_truth`; ``recognise_fn`` the estimator's recogniser ``(time, speed,
+    acceleration, effort) -> codes`` (:func:`railfmu.estimators.train.recognisers.recogniser`,
+    which imports this module: passed in, not named; None: the paper's rules, :func:`recognise`).
     ``metrics`` holds ``regime_accuracy`` and the :func:`feature_errors`; ``features`` is
     :func:`features`' dict."""
-    rec = recogniser(recogniser_name)(fix_time, speed, acceleration, effort)
+    rec = (recognise(speed, acceleration, effort) if recognise_fn is None
+           else recognise_fn(fix_time, speed, acceleration, effort))
     truth = feature_truth(style, train)
     feats = features(fix_time, speed, acceleration, effort, rec, truth["mass_effective"])
     accuracy = regime_accuracy(rec, true_regimes(time, true_speed, true_effort), fix_time, time)

@@ -38,6 +38,7 @@ from pathlib import Path
 
 import numpy as np
 
+from railfmu.estimators.train import recognisers
 from railfmu.experiments.engine.study_protocol import (
     RunData,
     Study,
@@ -157,7 +158,7 @@ def regime_scores(run: RunData, name: str, fixes: np.ndarray) -> tuple[dict, dic
     recogniser = roles.get("regime_recognisers", {}).get(name, "paper")
     m, feats = score(t, np.asarray(est[f"{name}.v"])[fixes], np.asarray(est[f"{name}.acceleration"])[fixes],
                      np.asarray(est[f"{name}.effort"])[fixes], sig["time"], sig[roles["v"]], sig[roles["effort"]],
-                     style, train, recogniser)
+                     style, train, recognisers.recogniser(recogniser))
     m = {k: _finite(x) if isinstance(x, float) else x for k, x in m.items()}
     rec = np.asarray(feats["regimes"])
     dt = np.r_[0.0, np.diff(t)]  # a fix stands for the interval before it
