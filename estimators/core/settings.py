@@ -76,7 +76,8 @@ class Settings:
         extra = set(extra)
         unknown = sorted(k for k in mapping if k not in fields and k not in extra)
         if unknown:
-            close = sorted({c for k in unknown for c in difflib.get_close_matches(k, [*fields, *extra], n=2)})
+            known = [*fields, *extra]
+            close = list(dict.fromkeys(c for k in unknown for c in difflib.get_close_matches(k, known, n=2)))
             raise ValueError(f"{where}: unknown setting{'s' if len(unknown) > 1 else ''} "
                              f"{', '.join(map(repr, unknown))}" + (f" (closest: {', '.join(close)})" if close else ""))
         hints = cls._hints.get(cls) or cls._hints.setdefault(cls, typing.get_type_hints(cls))
