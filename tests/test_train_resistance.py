@@ -22,6 +22,7 @@ import pytest
 from railfmu.models.track.line_profile import DEFAULT_LINE
 from railfmu.models.sources.sensors import noise
 from railfmu.models.train.longitudinal import R0, R1, R2, davis_specific
+from railfmu.estimators.train.recognisers import recogniser
 
 pytestmark = pytest.mark.skipif(shutil.which("gcc") is None or fmpy.platform != "linux64",
                                 reason="needs gcc on linux64")
@@ -110,7 +111,7 @@ def test_standard_run_end_to_end(standard):
     assert (e["regime_recogniser"], m["improved"]["regime_recogniser"]) == ("paper", "hmm")
     ours, _ = score(sig["time"][every], est["improved.v"][every], est["improved.acceleration"][every],
                     est["improved.effort"][every], sig["time"], sig["train.v"], sig["train.effort_specific"],
-                    style, train, "hmm")
+                    style, train, recogniser("hmm"))
     assert m["improved"]["regime_accuracy"] == pytest.approx(ours["regime_accuracy"], rel=1e-12)
     assert m["improved"]["regime_accuracy"] >= 0.95 > e["regime_accuracy"]
     # what the paper's UKF gives on this run (a wrong effort or acceleration breaks these)
