@@ -28,3 +28,15 @@ def track_wheelset_signals(fmu_dir: Path, track_params: dict, stop_time: float, 
     col = {c: res.data[:, j] for j, c in enumerate(res.columns)}
     Z = np.column_stack([col[f"wheelset.{s}"] for s in SENSORS])
     return col["time"], Z, col["track.alignment_1"]
+
+
+def installed_estimators(site: Path, dist: str = "stub_estimators", **estimators: str) -> Path:
+    """A distribution that registers ``estimators`` (name -> ``"module:Class"``) in the entry-point
+    group railfmu.estimators, as a third party's installed package would: ``site/<dist>-0.1.dist-info``
+    with METADATA and entry_points.txt. Put ``site`` on sys.path (or PYTHONPATH) to install it."""
+    info = site / f"{dist}-0.1.dist-info"
+    info.mkdir(parents=True, exist_ok=True)
+    (info / "METADATA").write_text(f"Metadata-Version: 2.1\nName: {dist}\nVersion: 0.1\n")
+    (info / "entry_points.txt").write_text(
+        "[railfmu.estimators]\n" + "".join(f"{k} = {v}\n" for k, v in estimators.items()))
+    return site

@@ -225,5 +225,5 @@ def test_smoother_speed(erri_low):
                                             ("q_xi", -1e-4), ("q_acc", -1.0)])
 def test_bad_noise_settings_are_refused(setting, value):
     """A standard deviation squares into R and would pass with the wrong sign: refused by name."""
-    with pytest.raises(ValueError, match=f"AlignmentKalmanFilter: {setting} must be"):
+    with pytest.raises(ValueError, match=f"AlignmentKalmanFilter: setting {setting} (must be|= nan is not a finite)"):
         AlignmentKalmanFilter(DT, V=V, **{setting: value})

@@ -102,12 +102,21 @@ SSD_EDITS = [  # (old, new, file, expected message part)
      'startConnector="alignment_1" endElement="wheelset" endConnector="xi">'
      '<ssc:LinearTransformation factor="1e308"/></ssd:Connection>', "SystemStructure.ssd",
      "a non-finite value left an FMU"),
+    ('class="alignment_kf"', 'class="alignment_kalman"', "SystemStructure.ssd",
+     "Observer 'alignment': class 'alignment_kalman' is not a registered estimator (entry points "
+     "railfmu.estimators); closest: alignment_kf"),
+    ('class="alignment_kf"', 'class="os.system"', "SystemStructure.ssd",  # nothing else is imported
+     "Observer 'alignment': class 'os.system' is not the module path of a registered estimator"),
+    ('<rf:Setting name="V" value="20"/>', '<rf:Setting name="V" value="20"/><rf:Setting name="sigma_ac" value="0.1"/>',
+     "SystemStructure.ssd", "Observer 'alignment': bad settings: AlignmentKalmanFilter: unknown setting 'sigma_ac' "
+     "(closest: sigma_acc"),
 ]
 
 
 @pytest.mark.parametrize("old, new, file, message", SSD_EDITS, ids=[
     "malformed-xml", "schema", "missing-fmu", "unknown-component", "unknown-connector", "type-mismatch",
-    "unit-mismatch", "unknown-parameter-in-variant", "step-size", "nan-from-fmu"])
+    "unit-mismatch", "unknown-parameter-in-variant", "step-size", "nan-from-fmu", "unknown-estimator",
+    "unregistered-module-path", "unknown-setting"])
 def test_bad_ssp_is_one_line_and_exit_2(tmp_path, old, new, file, message):
     exp = _broken_experiment(tmp_path, old, new, file)
     res = railfmu("run", str(exp), "--variant", "psd", "--stop-time", "1", "--out", str(tmp_path / "out"))

@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from helpers import installed_estimators
 from railfmu.estimators.core.observer import Observer, OfflineObserver
 from railfmu.experiments.engine.observer_bank import ObserverBank
 from railfmu.fmus.cosim.masters import run
@@ -68,6 +69,19 @@ class RecordMean(OfflineObserver):
     def _run(self, t, Z, U, mask):
         means = [Z[mask[:, j], j].mean() for j in range(2)]
         return np.tile([*means, len(t)], (len(t), 1))
+
+
+#: the stubs by registered name, as a third party registers its estimators (entry points)
+STUBS = {"stub_echo": "Echo", "stub_event_echo": "EventEcho", "stub_diverging": "Diverging",
+         "stub_record_mean": "RecordMean"}
+NAME = {cls: name for name, cls in STUBS.items()}
+
+
+@pytest.fixture(autouse=True)
+def stubs_registered(tmp_path, monkeypatch):
+    """The stubs installed, for each test, as a distribution registering them."""
+    monkeypatch.syspath_prepend(str(installed_estimators(
+        tmp_path / "site", **{k: f"test_observer_bank:{v}" for k, v in STUBS.items()})))
 
 
 def ssd(observers: str, step: float = 1e-3, stop: float = 0.2) -> str:
@@ -141,7 +155,7 @@ def ssd(observers: str, step: float = 1e-3, stop: float = 0.2) -> str:
 def observer(name="echo", cls="Echo", a="sensors.y_1", b="sensors.y_2", v="track.alignment_1", attrs="",
              valid="", truth='<rf:Truth name="a" connector="wheelset.ddy"/>') -> str:
     u = f'<rf:Input name="v" connector="{v}"/>' if v else ""
-    return (f'<rf:Observer name="{name}" class="test_observer_bank.{cls}" {attrs}>'
+    return (f'<rf:Observer name="{name}" class="{NAME.get(cls, cls)}" {attrs}>'
             f'<rf:Measurement name="a" connector="{a}" {valid}/><rf:Measurement name="b" connector="{b}"/>'
             f'{u}{truth}</rf:Observer>')
 
@@ -283,7 +297,7 @@ def test_offline_observer_gets_the_whole_record(fmu_dir, tmp_path):
 
 def test_offline_flag_must_match_the_class(fmu_dir, tmp_path):
     system = system_of(tmp_path, fmu_dir, observer(name="mean", cls="RecordMean", v="", truth=""))
-    with pytest.raises(UserError, match=r"RecordMean is an offline estimator; declare it with offline=\"true\""):
+    with pytest.raises(UserError, match=r"stub_record_mean is an offline estimator; declare it with offline=\"true\""):
         ObserverBank(system, None)
 
 
@@ -347,7 +361,7 @@ def test_a_switched_off_observer_is_not_built(fmu_dir, tmp_path):
     sig, bank = run_bank(system, tmp_path)
     assert [s.name for s in bank.specs] == ["echo"] and set(bank.estimators()) == {"echo"}
     assert set(bank.metrics(sig)) == {"echo"}
-    on = system_of(tmp_path, fmu_dir, obs.replace("NoSuchClass", "Echo"))
+    on = system_of(tmp_path, fmu_dir, obs.replace("NoSuchClass", "stub_echo"))
     on.observers[1].settings["enabled"] = True  # as --set off.enabled=true: built, without the setting
     assert set(ObserverBank(on, None).estimators()) == {"echo", "off"}
 

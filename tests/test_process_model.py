@@ -357,7 +357,7 @@ def ssd(observers: str, line: Path, stop: float = 200.0) -> str:
 """
 
 
-def ukf_observer(name="ukf_fmu", cls="railfmu.experiments.engine.fmu_process.FmuPaperUKF", component="train") -> str:
+def ukf_observer(name="ukf_fmu", cls="resistance_ukf_fmu", component="train") -> str:
     setting = f'<rf:Setting name="process_component" value="{component}"/>' if component else ""
     return (f'<rf:Observer name="{name}" class="{cls}" sampling="event" samplePeriod="10">'
             '<rf:Measurement name="position" connector="gnss.position" valid="gnss.valid"/>'
@@ -404,7 +404,7 @@ def test_ukf_fmu_in_an_ssd_takes_the_components_fmu_and_parameters(fmu_dir, tmp_
     (ukf_observer(component="track"), "Observer 'ukf_fmu': process_component 'track' is not a component"),
     (ukf_observer(component="gnss"), "Observer 'ukf_fmu': process_component 'gnss': GnssReceiver.fmu (ukf_fmu process model) as a "
                                       "process model: no variable 's_set'"),
-    (ukf_observer(cls="railfmu.estimators.train.running_resistance.PaperUKF"), "PaperUKF takes no FMU process model"),
+    (ukf_observer(cls="resistance_ukf_paper"), "PaperUKF takes no FMU process model"),
     (ukf_observer(component=""), "ukf_fmu': bad settings: needs the setting process_component"),
 ])
 def test_a_bad_process_component_is_one_line(fmu_dir, tmp_path, hilly_line, observer, message):

@@ -123,7 +123,7 @@ def test_example_experiment(fmu_dir):
     assert wheelset.parameters == {"V": 20.0}
     assert len(s.record) == 11
     (obs,) = s.observers
-    assert obs.cls == "railfmu.estimators.track.alignment.AlignmentKalmanFilter"
+    assert obs.cls == "alignment_kf"
     assert list(obs.measurements) == ["ddy", "dpsi", "ddy_f"] and obs.truth == {"xi": "track.alignment_1"}
     assert obs.settings == {"V": 20}
     assert s.warnings == [] and s.source == EXP
@@ -299,7 +299,7 @@ def test_recorder_and_observers(fmu_dir, tmp_path):
       <ssc:Annotation type="org.railfmu.recorder"><rf:Recorder><rf:Record connector="track.position"/>
       </rf:Recorder></ssc:Annotation>
       <ssc:Annotation type="org.railfmu.observers"><rf:Observers>
-        <rf:Observer name="o" class="railfmu.estimators.x.Y"><rf:Input name="a" connector="wheelset.ddy"/>
+        <rf:Observer name="o" class="alignment_kf"><rf:Input name="a" connector="wheelset.ddy"/>
           <rf:Truth name="xi" connector="track.alignment_1"/><rf:Setting name="on" value="true"/>
           <rf:Setting name="q" value="1e-3"/><rf:Setting name="label" value="left"/></rf:Observer>
       </rf:Observers></ssc:Annotation></ssd:Annotations>"""
@@ -559,7 +559,7 @@ def test_variant_and_set_override_observer_settings(fmu_dir, tmp_path):
 # -- observer settings bound to parameters, the experiment's master and stop time -----------
 
 BOUND = """<ssd:Annotations><ssc:Annotation type="org.railfmu.observers"><rf:Observers>
-  <rf:Observer name="o" class="railfmu.estimators.x.Y"><rf:Input name="a" connector="wheelset.ddy"/>
+  <rf:Observer name="o" class="alignment_kf"><rf:Input name="a" connector="wheelset.ddy"/>
     <rf:Setting name="conicity" parameter="wheelset.alpha"/><rf:Setting name="mass" parameter="wheelset.m"/>
     <rf:Setting name="level" parameter="track.psd_level"/>{extra}</rf:Observer>
 </rf:Observers></ssc:Annotation></ssd:Annotations>"""

@@ -57,6 +57,7 @@ from __future__ import annotations
 
 import functools
 import math
+from dataclasses import dataclass
 from typing import Any, ClassVar
 
 import numpy as np
@@ -67,6 +68,7 @@ from railfmu.models.vehicle.coach_vertical import COACH_VERTICAL, SENSORS
 from railfmu.estimators.core import kalman
 from railfmu.estimators.core.discretize import foh
 from railfmu.estimators.core.observer import Observer
+from railfmu.estimators.core.settings import Settings, setting
 
 #: rail inputs of the observers (bogie 1 = leading), then their rates
 RAILS = ("z_l1", "z_r1", "z_l2", "z_r2")
@@ -134,24 +136,72 @@ class DesignModel:
         return F, np.hstack([Gz, Gd]), (None if column is None else g[:, 0])
 
 
-def _sigmas(settings: dict[str, Any]) -> np.ndarray:
-    """Per-channel standard deviations from ``sigma`` (a number for every channel or a
-    mapping channel -> value; default :data:`SENSOR_NOISE_STD`)."""
-    s = settings.get("sigma")
-    if s is None:
-        s = SENSOR_NOISE_STD
-    if isinstance(s, (int, float)):
-        out = np.full(7, float(s))
-    elif isinstance(s, dict):
-        unknown = sorted(set(s) - set(SENSORS))
+def _per_channel(raw: Any, default: dict[str, float], what: str) -> tuple[float, ...]:
+    """7 values in the order of SENSORS from a number (every channel), a mapping channel ->
+    value (the others: ``default``) or a sequence of 7."""
+    if isinstance(raw, (int, float)) and not isinstance(raw, bool):
+        return (float(raw),) * 7
+    if isinstance(raw, dict):
+        unknown = sorted(set(raw) - set(SENSORS))
         if unknown:
-            raise ValueError(f"sigma: unknown channel(s) {unknown}")
-        out = np.array([float(s.get(c, SENSOR_NOISE_STD[c])) for c in SENSORS])
-    else:
-        out = np.asarray(s, dtype=float)
-    if out.shape != (7,) or not np.all(np.isfinite(out)) or np.any(out <= 0):
-        raise ValueError(f"sigma must be 7 positive standard deviations (order {SENSORS})")
+            raise ValueError(f"has unknown channel(s) {unknown}")
+        return tuple(float(raw.get(c, default[c])) for c in SENSORS)
+    out = np.asarray(raw, dtype=float)
+    if out.shape != (7,):
+        raise ValueError(f"must be 7 {what} (order {SENSORS})")
+    return tuple(out.tolist())
+
+
+def _sigmas(raw: Any) -> tuple[float, ...]:
+    """``sigma``: per-channel standard deviations (> 0; a number, mapping or 7 values)."""
+    out = _per_channel(raw, SENSOR_NOISE_STD, "positive standard deviations")
+    if not all(math.isfinite(v) and v > 0 for v in out):
+        raise ValueError(f"must be 7 positive standard deviations (order {SENSORS})")
     return out
+
+
+def _weights(raw: Any) -> tuple[float, ...]:
+    """``weights``: per-channel weights gamma (>= 0, not all 0; normalised by the observer)."""
+    out = _per_channel(raw, ONAT2016_WEIGHTS, "non-negative weights")
+    if not (all(math.isfinite(v) and v >= 0 for v in out) and sum(out) > 0):
+        raise ValueError("must be 7 non-negative numbers, not all 0")
+    return out
+
+
+@dataclass(frozen=True)
+class CoachSettings(Settings):
+    """What both observers take beside the CoachVertical parameters (their design model's)."""
+
+    k1_initial: float = setting(K1_INITIAL, "N/m", "initial guess of k1 (Onat et al. (2016), §4)", gt=0)
+    sigma: Any = setting(tuple(SENSOR_NOISE_STD[c] for c in SENSORS), "sensor units",
+                         "noise std per channel: a number, a mapping channel -> std, or 7 values", convert=_sigmas)
+    theta_min: float = setting(0.05, "", "lower bound of theta = k1 / k1_initial (the model stays stable)", gt=0)
+
+
+@dataclass(frozen=True)
+class WLSSettings(CoachSettings):
+    """:class:`SuspensionWLS`: the paper's filter tuning and the WLS update's."""
+
+    beta: float = setting(0.3, "", "relaxation of the Gauss-Newton step of theta", gt=0)
+    window: int = setting(100, "samples", "samples per update of theta", ge=1)
+    weights: Any = setting(tuple(ONAT2016_WEIGHTS[c] for c in SENSORS), "",
+                           "gamma per channel (a mapping or 7 values; normalised to sum 1)", convert=_weights)
+    p0: float = setting(0.01, "state units^2", "P0 = p0 I (the paper's)", gt=0)
+    q: float = setting(0.001, "state units^2", "Q = q I (the paper's)", ge=0)
+    r: float = setting(1.0, "sensor units^2", "R = r I (the paper's)", gt=0)
+    residual: str = setting("gradient", "", "the WLS step: least-squares 'gradient' or the paper's 'literal' sum",
+                            choices=("gradient", "literal"))
+
+
+@dataclass(frozen=True)
+class JointSettings(CoachSettings):
+    """:class:`SuspensionJoint`: noise intensities and initial standard deviations."""
+
+    q_theta: float = setting(1e-4, "1/s", "random-walk intensity of theta", ge=0)
+    q_acc: float = setting(1e-8, "m^2/s^3, rad^2/s^3", "white-noise intensity on the velocities", ge=0)
+    p0_theta: float = setting(0.3, "", "initial std of theta", gt=0)
+    p0_pos: float = setting(1e-3, "m, rad", "initial std of the positions", gt=0)
+    p0_vel: float = setting(1e-2, "m/s, rad/s", "initial std of the velocities", gt=0)
 
 
 class _CoachObserver(Observer):
@@ -160,20 +210,15 @@ class _CoachObserver(Observer):
 
     measurements: ClassVar[tuple[str, ...]] = SENSORS
     inputs: ClassVar[tuple[str, ...]] = (*RAILS, *RAIL_RATES)
-    _OWN: ClassVar[dict[str, Any]] = {}
+    Config: ClassVar[type[CoachSettings]] = CoachSettings
 
     def __init__(self, dt: float, **settings: Any) -> None:
         super().__init__(dt, **settings)
-        model_params = {k: v for k, v in settings.items() if k in COACH_VERTICAL.default_parameters()}
-        unknown = sorted(set(settings) - set(self._OWN) - set(model_params))
-        if unknown:
-            raise ValueError(f"{type(self).__name__}: unknown setting(s) {unknown}")
-        self.s = {**self._OWN, **{k: v for k, v in settings.items() if k in self._OWN}}
-        self.model = DesignModel(model_params)
-        self.k1_initial = float(self.s["k1_initial"])
-        if not (math.isfinite(self.k1_initial) and self.k1_initial > 0):
-            raise ValueError(f"{type(self).__name__}: k1_initial must be positive, not {self.k1_initial!r}")
-        self.sigma = _sigmas(self.s)
+        model = COACH_VERTICAL.default_parameters()
+        self.config = self.Config.from_mapping(settings, type(self).__name__, extra=model)
+        self.model = DesignModel({k: v for k, v in settings.items() if k in model})
+        self.k1_initial = self.config.k1_initial
+        self.sigma = np.array(self.config.sigma)
 
     def _hold_rails(self) -> None:
         """After a prediction: extrapolate the rails with their rates (the FMU's hold) for
@@ -286,39 +331,29 @@ class SuspensionWLS(_CoachObserver):
       converges in 9 s and detects the fault in 8 s (noisy data).
     * ``theta`` is kept >= ``theta_min`` (0.05) so the model stays stable.
 
-    Settings: ``k1_initial`` (N/m, 330e3), ``beta`` (0.3), ``window`` (100), ``weights``
-    (7 values or a mapping; normalised to sum 1), ``sigma`` (per channel, see
-    :data:`SENSOR_NOISE_STD`), ``p0`` (0.01), ``q`` (0.001), ``r`` (1.0), ``residual``
-    ("gradient" | "literal"), ``theta_min`` (0.05), and any CoachVertical parameter.
+    Settings: :class:`WLSSettings` (``k1_initial`` N/m, ``beta``, ``window``, ``weights``,
+    ``sigma``, ``p0``, ``q``, ``r``, ``residual``, ``theta_min``: units, defaults and checks
+    there; as ``self.config``) and any CoachVertical parameter.
     """
 
     outputs: ClassVar[tuple[str, ...]] = ("k1", *STATES)
     units: ClassVar[dict[str, str]] = {**_SENSOR_UNITS, **{r: "m" for r in RAILS},
                                        **{r: "m/s" for r in RAIL_RATES}, "k1": "N/m",
                                        **dict(zip(STATES, _STATE_UNITS))}
-    _OWN: ClassVar[dict[str, Any]] = {
-        "k1_initial": K1_INITIAL, "beta": 0.3, "window": 100, "weights": None, "sigma": None,
-        "p0": 0.01, "q": 0.001, "r": 1.0, "residual": "gradient", "theta_min": 0.05}
+    Config: ClassVar[type[CoachSettings]] = WLSSettings
 
     def __init__(self, dt: float, **settings: Any) -> None:
         super().__init__(dt, **settings)
-        s = self.s
-        self.beta = float(s["beta"])
-        self.window = int(s["window"])
-        if self.window < 1 or self.window != s["window"]:
-            raise ValueError(f"SuspensionWLS: window must be a positive integer, not {s['window']!r}")
-        w = s["weights"] if s["weights"] is not None else ONAT2016_WEIGHTS
-        w = np.array([float(w[c]) for c in SENSORS]) if isinstance(w, dict) else np.asarray(w, float)
-        if w.shape != (7,) or np.any(w < 0) or not w.sum() > 0:
-            raise ValueError("SuspensionWLS: weights must be 7 non-negative numbers")
+        c = self.config
+        self.beta = c.beta
+        self.window = c.window
+        w = np.array(c.weights)
         self.gamma = w / w.sum()
-        if s["residual"] not in ("gradient", "literal"):
-            raise ValueError(f"SuspensionWLS: residual must be 'gradient' or 'literal', not {s['residual']!r}")
-        self.gradient = s["residual"] == "gradient"
-        self.theta_min = float(s["theta_min"])
-        self.P0 = np.eye(14) * float(s["p0"])
-        self.Q = np.eye(14) * float(s["q"])
-        self.R = np.eye(7) * float(s["r"])
+        self.gradient = c.residual == "gradient"
+        self.theta_min = c.theta_min
+        self.P0 = np.eye(14) * c.p0
+        self.Q = np.eye(14) * c.q
+        self.R = np.eye(7) * c.r
         self.reset()
 
     def _reset(self) -> None:
@@ -429,34 +464,25 @@ class SuspensionJoint(_CoachObserver):
       positions 1e-3 (m, rad), the velocities 1e-2 (m/s, rad/s); the state starts at rest.
     * ``theta`` is kept >= ``theta_min`` (0.05) so the model stays stable.
 
-    Settings: ``k1_initial`` (N/m, 330e3), ``sigma``, ``q_theta`` (1/s), ``q_acc``,
-    ``p0_theta``, ``p0_pos``, ``p0_vel`` (standard deviations), ``theta_min``, and any
+    Settings: :class:`JointSettings` (``k1_initial`` N/m, ``sigma``, ``q_theta`` 1/s, ``q_acc``,
+    ``p0_theta``, ``p0_pos``, ``p0_vel``, ``theta_min``; as ``self.config``) and any
     CoachVertical parameter.
     """
 
     outputs: ClassVar[tuple[str, ...]] = ("k1", "k1_std", *STATES)
     units: ClassVar[dict[str, str]] = {**SuspensionWLS.units, "k1_std": "N/m"}
-    _OWN: ClassVar[dict[str, Any]] = {
-        "k1_initial": K1_INITIAL, "sigma": None, "q_theta": 1e-4, "q_acc": 1e-8, "p0_theta": 0.3,
-        "p0_pos": 1e-3, "p0_vel": 1e-2, "theta_min": 0.05}
+    Config: ClassVar[type[CoachSettings]] = JointSettings
 
     def __init__(self, dt: float, **settings: Any) -> None:
         super().__init__(dt, **settings)
-        s = self.s
-        for name in ("q_theta", "q_acc"):
-            if not float(s[name]) >= 0:
-                raise ValueError(f"SuspensionJoint: {name} must be >= 0")
-        for name in ("p0_theta", "p0_pos", "p0_vel"):
-            if not float(s[name]) > 0:
-                raise ValueError(f"SuspensionJoint: {name} must be > 0")
+        c = self.config
         self.R = np.diag(self.sigma ** 2)
         self.Q = np.zeros((15, 15))
         # white noise on the velocities / theta, integrated over one step (first order)
-        self.Q[7:14, 7:14] = np.eye(7) * float(s["q_acc"]) * self.dt
-        self.Q[14, 14] = float(s["q_theta"]) * self.dt
-        self.P0 = np.diag(np.square([float(s["p0_pos"])] * 7 + [float(s["p0_vel"])] * 7
-                                    + [float(s["p0_theta"])]))
-        self.theta_min = float(s["theta_min"])
+        self.Q[7:14, 7:14] = np.eye(7) * c.q_acc * self.dt
+        self.Q[14, 14] = c.q_theta * self.dt
+        self.P0 = np.diag(np.square([c.p0_pos] * 7 + [c.p0_vel] * 7 + [c.p0_theta]))
+        self.theta_min = c.theta_min
         self._I = np.eye(15)
         self.reset()
 
@@ -495,4 +521,4 @@ class SuspensionJoint(_CoachObserver):
     def finish(self) -> dict:
         est = self._estimate()
         return {**super().finish(), "k1": float(est[0]), "k1_std": float(est[1]),
-                "q_theta": float(self.s["q_theta"])}
+                "q_theta": self.config.q_theta}

@@ -124,6 +124,7 @@ read here as selecting ``dpsi`` and ``xi``.
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from typing import Any, ClassVar
 
 import numpy as np
@@ -135,6 +136,7 @@ from railfmu.models.vehicle.wheelset import WHEELSET
 from railfmu.estimators.core import kalman, smoothers
 from railfmu.estimators.core.discretize import van_loan
 from railfmu.estimators.core.observer import Observer, OfflineObserver
+from railfmu.estimators.core.settings import Settings, setting
 
 STATES = ("y", "psi", "y_f", "dy", "dpsi", "dy_f", "xi")
 _STATE_UNITS = ("m", "rad", "m", "m/s", "rad/s", "m/s", "m")
@@ -155,15 +157,24 @@ def sigma_virtual_from_spectrum(q_xi: float, V: float, dt: float) -> float:
     return math.sqrt(q_xi / dt) / (V * track.OMEGA_R)
 
 
-def _as_bool(value: Any, name: str) -> bool:
-    """A boolean setting, also from the text of an SSD annotation ("true"/"false")."""
-    if isinstance(value, str):
-        if value.strip().lower() in ("true", "1", "yes"):
-            return True
-        if value.strip().lower() in ("false", "0", "no"):
-            return False
-        raise ValueError(f"AlignmentKalmanFilter: {name} must be true or false, not {value!r}")
-    return bool(value)
+@dataclass(frozen=True)
+class AlignmentSettings(Settings):
+    """The filter's own settings (the design model's, ``V`` and any WHEELSET parameter, beside
+    them are checked by the model); None: derived (module docstring)."""
+
+    sigma_acc: float = setting(0.01, "m/s2", "accelerometer noise std (ddy, ddy_f); squares into R", gt=0)
+    sigma_gyro: float = setting(5e-4, "rad/s", "yaw-rate gyro noise std (dpsi)", gt=0)
+    sigma_virtual: float | None = setting(None, "m", "std of the virtual reading xi = 0; default "
+                                          "sigma_virtual_from_spectrum", gt=0)
+    q_xi: float | None = setting(None, "m^2/s", "random-walk intensity of xi; default q_xi_from_spectrum(V, "
+                                 "psd_level)", gt=0)
+    psd_level: int = setting(1, "", "ERRI B176 level (1 low, 2 high) of the default q_xi")
+    q_acc: float = setting(0.0, "m^2/s^3", "white-noise intensity on the lateral velocities", ge=0)
+    q_yaw: float = setting(0.0, "rad^2/s^3", "white-noise intensity on the yaw rate", ge=0)
+    steady_state: bool = setting(True, "", "stationary gain from the DARE (else the time-varying filter)")
+    P0: tuple[float, ...] | None = setting(None, "state units", "7 standard deviations of the initial estimate "
+                                           "(time-varying filter; default the stationary a-priori covariance)",
+                                           gt=0, length=7)
 
 
 #: typical magnitudes of the states (m, rad, m, m/s, rad/s, m/s, m) to balance the DARE
@@ -179,12 +190,8 @@ class AlignmentKalmanFilter(Observer):
     ``dy_f`` (m/s), and the alignment ``xi`` (m).
 
     Settings: ``V`` (m/s, 20), any :data:`railfmu.models.vehicle.wheelset.WHEELSET` parameter (``alpha``,
-    ``f11``, ...), ``sigma_acc`` (m/s2, 0.01), ``sigma_gyro`` (rad/s, 5e-4), ``sigma_virtual``
-    (m; default :func:`sigma_virtual_from_spectrum`), ``q_xi`` (m^2/s; default
-    :func:`q_xi_from_spectrum` at ``V`` and ``psd_level``), ``psd_level`` (1), ``q_acc``
-    (m^2/s^3, 0), ``q_yaw`` (rad^2/s^3, 0), ``steady_state`` (True), ``P0`` (7 standard
-    deviations of the initial estimate; default: the stationary a-priori covariance; the
-    time-varying filter only). The equations are in the module docstring.
+    ``f11``, ...) and :class:`AlignmentSettings` (units, defaults, checks), as ``self.config``.
+    The equations are in the module docstring.
     """
 
     measurements: ClassVar[tuple[str, ...]] = ("ddy", "dpsi", "ddy_f")
@@ -192,32 +199,17 @@ class AlignmentKalmanFilter(Observer):
     units: ClassVar[dict[str, str]] = {"ddy": "m/s2", "dpsi": "rad/s", "ddy_f": "m/s2",
                                        **dict(zip(STATES, _STATE_UNITS, strict=True))}
 
-    # the filter's own settings and their defaults (None: derived, see the module docstring)
-    _OWN: ClassVar[dict[str, Any]] = {
-        "sigma_acc": 0.01, "sigma_gyro": 5e-4, "sigma_virtual": None, "q_xi": None, "psd_level": 1,
-        "q_acc": 0.0, "q_yaw": 0.0, "steady_state": True, "P0": None}
-
     def __init__(self, dt: float, **settings: Any) -> None:
         super().__init__(dt, **settings)
-        known = set(self._OWN) | {p.name for p in WHEELSET.parameters}
-        unknown = sorted(set(settings) - known)
-        if unknown:
-            raise ValueError(f"AlignmentKalmanFilter: unknown setting(s) {unknown}")
-        s = {**self._OWN, **settings}
-        self.params = {**WHEELSET.default_parameters(),
-                       **{k: float(v) for k, v in s.items() if k in WHEELSET.default_parameters()}}
+        model = WHEELSET.default_parameters()
+        self.config = c = AlignmentSettings.from_mapping(settings, "AlignmentKalmanFilter", extra=model)
+        self.params = {**model, **{k: float(v) for k, v in settings.items() if k in model}}
         WHEELSET.check_parameters(self.params)
         V = self.params["V"]
-        self.q_xi = float(s["q_xi"]) if s["q_xi"] is not None else q_xi_from_spectrum(V, s["psd_level"])
-        # standard deviations square into R, so a sign slip would pass unnoticed
-        for name, positive in (("sigma_acc", True), ("sigma_gyro", True), ("sigma_virtual", True),
-                               ("q_xi", True), ("q_acc", False), ("q_yaw", False)):
-            v = self.q_xi if name == "q_xi" else s[name]
-            if v is not None and not (math.isfinite(float(v)) and (float(v) > 0 if positive else float(v) >= 0)):
-                raise ValueError(f"AlignmentKalmanFilter: {name} must be {'> 0' if positive else '>= 0'}, not {v!r}")
-        self.sigma_virtual = (float(s["sigma_virtual"]) if s["sigma_virtual"] is not None
+        self.q_xi = c.q_xi if c.q_xi is not None else q_xi_from_spectrum(V, c.psd_level)
+        self.sigma_virtual = (c.sigma_virtual if c.sigma_virtual is not None
                               else sigma_virtual_from_spectrum(self.q_xi, V, self.dt))
-        self.steady_state = _as_bool(s["steady_state"], "steady_state")
+        self.steady_state = c.steady_state
 
         A, B, C, D = WHEELSET.linearize(self.params)
         i_xi = [u.name for u in WHEELSET.inputs].index("xi")
@@ -230,10 +222,10 @@ class AlignmentKalmanFilter(Observer):
         H[1, STATES.index("dpsi")] = 1.0
         H[2, :6], H[2, 6] = C[rows.index("ddy_f")], D[rows.index("ddy_f"), i_xi]
         H[3, 6] = 1.0
-        Q_c = np.diag([0.0, 0.0, 0.0, s["q_acc"], s["q_yaw"], s["q_acc"], self.q_xi])
+        Q_c = np.diag([0.0, 0.0, 0.0, c.q_acc, c.q_yaw, c.q_acc, self.q_xi])
         self.F_c, self.H, self.Q_c = F_c, H, Q_c
         self.F, self.Q = van_loan(F_c, Q_c, self.dt)
-        self.R = np.diag(np.square([s["sigma_acc"], s["sigma_gyro"], s["sigma_acc"], self.sigma_virtual]))
+        self.R = np.diag(np.square([c.sigma_acc, c.sigma_gyro, c.sigma_acc, self.sigma_virtual]))
 
         # stationary filter: P^- from the DARE in scaled states (the covariances span ten decades)
         try:
@@ -241,13 +233,7 @@ class AlignmentKalmanFilter(Observer):
                 self.F, self.H, self.Q, self.R, scale=_STATE_SCALE)
         except ValueError as e:
             raise ValueError(f"AlignmentKalmanFilter: {e}") from None
-        if s["P0"] is None:
-            self.P0 = self.P_prior.copy()
-        else:
-            std = np.asarray(s["P0"], dtype=float)
-            if std.shape != (7,) or not np.all(np.isfinite(std)) or np.any(std <= 0):
-                raise ValueError("AlignmentKalmanFilter: P0 needs 7 positive standard deviations")
-            self.P0 = np.diag(np.square(std))
+        self.P0 = self.P_prior.copy() if c.P0 is None else np.diag(np.square(c.P0))
         self._zbuf = np.zeros(4)  # [ddy, dpsi, ddy_f, 0]: the virtual reading stays 0
         self._row_gains: dict[tuple[int, ...], np.ndarray] = {}
         self.reset()

@@ -53,6 +53,7 @@ from __future__ import annotations
 
 import bisect
 from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, ClassVar
 
@@ -63,6 +64,7 @@ from railfmu.models.train.longitudinal import GAMMA, R0, R1, R2
 
 from railfmu.estimators.core import kalman, ukf
 from railfmu.estimators.core.observer import Observer
+from railfmu.estimators.core.settings import Settings, setting
 
 KMH = 1.0 / 3.6
 #: Table 1 of Cunillera et al. (2022): initial standard deviations of (s, v, r0, r1, r2), SI
@@ -147,15 +149,40 @@ def ode_process(line: LineTerm, integrator_step: float = 0.05) -> Process:
     return f
 
 
-def _setting(settings: dict, name: str, default: float) -> float:
-    raw = settings.get(name, default)
-    try:
-        value = float(raw)
-    except (TypeError, ValueError):
-        raise ValueError(f"setting {name} = {raw!r} is not a number") from None
-    if not np.isfinite(value):
-        raise ValueError(f"setting {name} = {value!r} is not a finite number")
-    return value
+def _line(raw: Any) -> Any:
+    """``line_file``: a path or a LineProfile; '' (an SSD's empty value) is the shipped line."""
+    return raw or None
+
+
+@dataclass(frozen=True)
+class ResistanceSettings(Settings):
+    """What both estimators take: the starting Davis coefficients and the line term."""
+
+    r0_init: float = setting(R0, "N/kg", "Davis r0 to start from (the published value)")
+    r1_init: float = setting(R1, "N.s/(m.kg)", "Davis r1 to start from")
+    r2_init: float = setting(R2, "N.s2/(m2.kg)", "Davis r2 to start from")
+    line_file: Any = setting(None, "", "line profile CSV (gradient, curvature) or a LineProfile; None or '': "
+                             "the shipped line", convert=_line)
+    rotating_mass_factor: float = setting(GAMMA, "", "gamma, effective over static mass", gt=0)
+    regime_recogniser: str | None = setting(None, "", "how a study reads its regimes ('paper', 'hmm'; the "
+                                            "study checks it); default the class attribute")
+
+
+@dataclass(frozen=True)
+class PaperUKFSettings(ResistanceSettings):
+    """:class:`PaperUKF`: Table 1 of Cunillera et al. (2022)."""
+
+    sigma_s0: float = setting(PAPER_SIGMAS[0], "m", "initial std of s; also its scaling D", gt=0)
+    sigma_v0: float = setting(PAPER_SIGMAS[1], "m/s", "initial std of v", gt=0)
+    sigma_r0_0: float = setting(PAPER_SIGMAS[2], "N/kg", "initial std of r0", gt=0)
+    sigma_r1_0: float = setting(PAPER_SIGMAS[3], "N.s/(m.kg)", "initial std of r1", gt=0)
+    sigma_r2_0: float = setting(PAPER_SIGMAS[4], "N.s2/(m2.kg)", "initial std of r2", gt=0)
+    sigma_position: float = setting(PAPER_SIGMA_S, "m", "GNSS position std", gt=0)
+    sigma_speed: float = setting(PAPER_SIGMA_V, "m/s", "GNSS speed std (1 km/h)", gt=0)
+    alpha: float = setting(PAPER_ALPHA, "", "Merwe sigma-point spread")
+    beta: float = setting(PAPER_BETA, "", "Merwe prior-distribution weight (2: Gaussian)")
+    kappa: float = setting(PAPER_KAPPA, "", "Merwe secondary scaling")
+    integrator_step: float = setting(0.05, "s", "RK4 step of process='ode'", gt=0)
 
 
 class PaperUKF(Observer):
@@ -172,7 +199,8 @@ class PaperUKF(Observer):
     (1 km/h, in m/s), ``alpha``, ``beta``, ``kappa`` (Table 1), ``line_file`` (the line
     profile; default the shipped line), ``rotating_mass_factor`` (1.06), ``process``
     (``"discrete"``, eq. 4, or ``"ode"``; or a callable, see the module docstring),
-    ``integrator_step`` (s, for ``"ode"``).
+    ``integrator_step`` (s, for ``"ode"``); units and checks in :class:`PaperUKFSettings`
+    (``self.config``).
     """
 
     measurements: ClassVar[tuple[str, ...]] = ("position", "speed")
@@ -184,29 +212,22 @@ class PaperUKF(Observer):
 
     def __init__(self, dt: float, process: str | Process = "discrete", **settings: Any) -> None:
         super().__init__(dt, **settings)
-        self.line = LineTerm(settings.get("line_file") or None, _setting(settings, "rotating_mass_factor", GAMMA))
+        self.config = c = PaperUKFSettings.from_mapping(settings, type(self).__name__)
+        self.line = LineTerm(c.line_file, c.rotating_mass_factor)
         if callable(process):
             self.process = process
         elif process == "discrete":
             self.process = discrete_process(self.line)
         elif process == "ode":
-            self.process = ode_process(self.line, _setting(settings, "integrator_step", 0.05))
+            self.process = ode_process(self.line, c.integrator_step)
         else:
             raise ValueError(f"process must be 'discrete', 'ode' or a callable, not {process!r}")
-        self.x_init = np.array([0.0, 0.0, _setting(settings, "r0_init", R0), _setting(settings, "r1_init", R1),
-                                _setting(settings, "r2_init", R2)])
-        names = ("sigma_s0", "sigma_v0", "sigma_r0_0", "sigma_r1_0", "sigma_r2_0")
-        self.D = np.array([_setting(settings, k, d) for k, d in zip(names, PAPER_SIGMAS)])
-        if not (self.D > 0).all():
-            raise ValueError("the initial standard deviations must be > 0")
-        sr = np.array([_setting(settings, "sigma_position", PAPER_SIGMA_S), _setting(settings, "sigma_speed", PAPER_SIGMA_V)])
-        if not (sr > 0).all():
-            raise ValueError("sigma_position and sigma_speed must be > 0")
+        self.x_init = np.array([0.0, 0.0, c.r0_init, c.r1_init, c.r2_init])
+        self.D = np.array([c.sigma_s0, c.sigma_v0, c.sigma_r0_0, c.sigma_r1_0, c.sigma_r2_0])
+        sr = np.array([c.sigma_position, c.sigma_speed])
         # R in scaled measurement units: z~ = z / D[:2]
         self.R = np.diag((sr / self.D[:2]) ** 2)
-        self.points = ukf.MerweScaledSigmaPoints(5, alpha=_setting(settings, "alpha", PAPER_ALPHA),
-                                                 beta=_setting(settings, "beta", PAPER_BETA),
-                                                 kappa=_setting(settings, "kappa", PAPER_KAPPA))
+        self.points = ukf.MerweScaledSigmaPoints(5, alpha=c.alpha, beta=c.beta, kappa=c.kappa)
         self.Q = np.zeros((5, 5))
 
     # scaled process and measurement models
@@ -316,6 +337,26 @@ class PaperUKF(Observer):
 # ---- the improved estimator: coasting segments, a prior, a kinematic filter ---------------------
 #: the standard deviation of a speed reading rounded to 1 km/h (uniform error: q / sqrt(12)), m/s
 ROUNDING_SIGMA_SPEED = KMH / np.sqrt(12.0)
+
+
+@dataclass(frozen=True)
+class ImprovedSettings(ResistanceSettings):
+    """:class:`ImprovedEstimator` (its docstring says why each value)."""
+
+    r0_init: float = setting(R0, "N/kg", "prior mean of r0 (the published value)", gt=0)
+    r1_init: float = setting(R1, "N.s/(m.kg)", "prior mean of r1", gt=0)
+    r2_init: float = setting(R2, "N.s2/(m2.kg)", "prior mean of r2", gt=0)
+    prior_rel_sigma: float = setting(0.1, "", "prior std as a fraction of each prior mean", gt=0)
+    sigma_speed: float = setting(float(ROUNDING_SIGMA_SPEED), "m/s", "speed std (1 km/h rounding / sqrt(12))",
+                                 gt=0)
+    sigma_position: float = setting(PAPER_SIGMA_S, "m", "position std", gt=0)
+    jerk_noise: float = setting(1e-2, "m^2/s^5", "white-jerk intensity of the kinematic filter", gt=0)
+    effort_band: float = setting(0.04, "N/kg", "|effort| below which a window counts as coasting", gt=0)
+    recognition_window: float = setting(10.0, "s", "span of the fixes a coasting test looks back over", gt=0)
+    min_coast: float = setting(30.0, "s", "shortest coasting segment fitted", ge=0)
+    min_speed: float = setting(5.0 * KMH, "m/s", "slowest interval fitted", ge=0)
+    test_sigmas: float = setting(4.0, "", "prior predictive test of a segment, in standard deviations", gt=0)
+    r_random_walk: float = setting(0.0, "1/sqrt(s)", "relative random walk of the coefficients", ge=0)
 
 
 def coasting_information(t: np.ndarray, v: np.ndarray, g_mean: np.ndarray, sigma_speed: float
@@ -437,7 +478,8 @@ class ImprovedEstimator(Observer):
     ``recognition_window`` (s), ``min_coast`` (s), ``min_speed`` (m/s), ``test_sigmas``
     (-), ``r_random_walk`` (1/sqrt(s)), ``line_file``, ``rotating_mass_factor``;
     ``regime_recogniser`` (how a study reads its regimes, ``"hmm"`` unless set: the class
-    attribute of that name, :func:`railfmu.estimators.train.recognisers.recogniser`).
+    attribute of that name, :func:`railfmu.estimators.train.recognisers.recogniser`); units,
+    defaults and checks in :class:`ImprovedSettings` (``self.config``).
     """
 
     measurements: ClassVar[tuple[str, ...]] = PaperUKF.measurements
@@ -447,36 +489,16 @@ class ImprovedEstimator(Observer):
     #: its outputs are read by the hidden Markov model over the run (estimators/regime_decoding.py)
     regime_recogniser: ClassVar[str] = "hmm"
 
-    DEFAULTS: ClassVar[dict[str, float]] = {
-        "prior_rel_sigma": 0.1, "sigma_speed": float(ROUNDING_SIGMA_SPEED), "sigma_position": PAPER_SIGMA_S,
-        "jerk_noise": 1e-2, "effort_band": 0.04, "recognition_window": 10.0, "min_coast": 30.0,
-        "min_speed": 5.0 * KMH, "test_sigmas": 4.0, "r_random_walk": 0.0}
-
     def __init__(self, dt: float, **settings: Any) -> None:
         super().__init__(dt, **settings)
-        unknown = sorted(set(settings) - {*self.DEFAULTS, "r0_init", "r1_init", "r2_init", "line_file",
-                                          "rotating_mass_factor", "regime_recogniser"})
-        if unknown:
-            raise ValueError(f"unknown setting(s) {', '.join(unknown)}")
-        self.line = LineTerm(settings.get("line_file") or None, _setting(settings, "rotating_mass_factor", GAMMA))
-        p = {k: _setting(settings, k, d) for k, d in self.DEFAULTS.items()}
-        for k in ("prior_rel_sigma", "sigma_speed", "sigma_position", "jerk_noise", "effort_band",
-                  "recognition_window", "test_sigmas"):
-            if not p[k] > 0:
-                raise ValueError(f"setting {k} must be > 0, not {p[k]!r}")
-        for k in ("min_coast", "min_speed", "r_random_walk"):
-            if p[k] < 0:
-                raise ValueError(f"setting {k} must be >= 0, not {p[k]!r}")
-        self.p = p
-        self.theta0 = np.array([_setting(settings, "r0_init", R0), _setting(settings, "r1_init", R1),
-                                _setting(settings, "r2_init", R2)])
-        if not (self.theta0 > 0).all():
-            raise ValueError("r0_init, r1_init, r2_init must be > 0 (the prior's sigma is a fraction of each)")
-        self._W = p["recognition_window"] * (1.0 - 1e-9)  # fix times on a grid, up to round-off
-        self.Lambda0 = np.diag((p["prior_rel_sigma"] * self.theta0) ** -2.0)
-        self.R = np.diag([p["sigma_position"] ** 2, p["sigma_speed"] ** 2])
+        self.config = self.p = p = ImprovedSettings.from_mapping(settings, type(self).__name__)
+        self.line = LineTerm(p.line_file, p.rotating_mass_factor)
+        self.theta0 = np.array([p.r0_init, p.r1_init, p.r2_init])
+        self._W = p.recognition_window * (1.0 - 1e-9)  # fix times on a grid, up to round-off
+        self.Lambda0 = np.diag((p.prior_rel_sigma * self.theta0) ** -2.0)
+        self.R = np.diag([p.sigma_position ** 2, p.sigma_speed ** 2])
         self.H = np.eye(2, 3)
-        h, q = self.dt, p["jerk_noise"]
+        h, q = self.dt, p.jerk_noise
         self.F = np.array([[1.0, h, 0.5 * h * h], [0.0, 1.0, h], [0.0, 0.0, 1.0]])
         self.Q = q * np.array([[h**5 / 20, h**4 / 8, h**3 / 6], [h**4 / 8, h**3 / 3, h**2 / 2],
                                [h**3 / 6, h**2 / 2, h]])
@@ -573,9 +595,9 @@ class ImprovedEstimator(Observer):
         while self._a + 1 < n and t - self.fix_t[self._a + 1] >= self._W:
             self._a += 1
         a = self._a
-        if t - self.fix_t[a] >= self._W and abs(self._effort(a, n)) <= self.p["effort_band"]:
+        if t - self.fix_t[a] >= self._W and abs(self._effort(a, n)) <= self.p.effort_band:
             for i in range(a, n):
-                self.cand[i] = self.vb[i] > self.p["min_speed"]
+                self.cand[i] = self.vb[i] > self.p.min_speed
         while self._done < a:  # no later window holds an interval before a: its flag is final
             i = self._done
             if self.cand[i] and self._open is None:
@@ -626,21 +648,21 @@ class ImprovedEstimator(Observer):
             return None
         T = self.fix_t[f1] - self.fix_t[f0]
         p = self.p
-        if T < p["min_coast"]:
+        if T < p.min_coast:
             return None
         phibar = (self.Phi[f1] - self.Phi[f0]) / T
-        var = 2.0 * p["sigma_speed"] ** 2 / T**2 + np.sum((p["prior_rel_sigma"] * self.theta0 * phibar) ** 2)
-        if abs(self._effort(f0, f1)) > p["test_sigmas"] * np.sqrt(var):
+        var = 2.0 * p.sigma_speed ** 2 / T**2 + np.sum((p.prior_rel_sigma * self.theta0 * phibar) ** 2)
+        if abs(self._effort(f0, f1)) > p.test_sigmas * np.sqrt(var):
             return None
         M = self._hist[f1 - f0]
         C = M[:4, :4] - np.outer(M[:4, 4], M[:4, 4]) / M[4, 4]
-        w = 1.0 / p["sigma_speed"] ** 2
+        w = 1.0 / p.sigma_speed ** 2
         return w * C[:3, :3], w * C[:3, 3]
 
     def _posterior(self, P: np.ndarray, theta: np.ndarray, t_prev: float, t: float,
                    info: tuple[np.ndarray, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
         """(C3) in information form, after the random walk from t_prev to t: (P, theta)."""
-        q = self.p["r_random_walk"]
+        q = self.p.r_random_walk
         if q > 0:
             P = P + np.diag((q * self.theta0) ** 2) * max(t - t_prev, 0.0)
         Pinv = np.linalg.inv(P)

@@ -14,6 +14,7 @@ import argparse
 import os
 import sys
 import time
+import warnings
 from pathlib import Path
 
 # The estimators multiply small matrices (14 x 14) every step: BLAS threads only fight over
@@ -21,6 +22,7 @@ from pathlib import Path
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 
+from railfmu.experiments.engine.registry import DeprecatedEstimatorPath  # noqa: E402
 from railfmu.fmus.generate.build import BuildError  # noqa: E402
 from railfmu.models.errors import UserError  # noqa: E402
 
@@ -194,6 +196,14 @@ class _Parser(argparse.ArgumentParser):
         sys.exit(2)
 
 
+def _show_warning(message, category, filename, lineno, file=None, line=None, _default=warnings.showwarning):
+    """Our deprecations as one line, like every other user-facing message; others as Python shows them."""
+    if issubclass(category, DeprecatedEstimatorPath):
+        print(f"railfmu: warning: {message}", file=sys.stderr)
+    else:
+        _default(message, category, filename, lineno, file, line)
+
+
 def _version() -> str:
     from importlib.metadata import PackageNotFoundError, version
 
@@ -220,6 +230,8 @@ class _SubParsers(argparse._SubParsersAction):
 
 
 def main(argv: list[str] | None = None) -> int:
+    warnings.simplefilter("default", DeprecatedEstimatorPath)  # Python hides DeprecationWarnings outside __main__
+    warnings.showwarning = _show_warning
     ap = _Parser(prog="railfmu", description=__doc__.splitlines()[0], parents=[_verbosity(True)])
     ap.add_argument("--version", action="version", version=f"railfmu {_version()}")
     ap.register("action", "parsers", _SubParsers)

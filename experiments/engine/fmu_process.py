@@ -19,7 +19,7 @@ the process model and hands it in.
 In an SSD (``org.railfmu.observers``) the observer names the system component whose FMU and
 parameters (its line profile, masses, integrator step) the process model uses::
 
-    <rf:Observer name="ukf_fmu" class="railfmu.experiments.engine.fmu_process.FmuPaperUKF"
+    <rf:Observer name="ukf_fmu" class="resistance_ukf_fmu"
                  sampling="event" samplePeriod="10">
       <rf:Measurement name="position" connector="gnss.position" valid="gnss.valid"/>
       <rf:Measurement name="speed" connector="gnss.speed" valid="gnss.valid"/>

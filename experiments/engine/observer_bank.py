@@ -1,7 +1,8 @@
 """Observers attached to a run: a recorder sink that feeds each estimator its bound signals.
 
 The SSD declares each observer (``org.railfmu.observers`` annotation, read into
-:class:`railfmu.fmus.cosim.system.ObserverSpec`). :class:`ObserverBank` instantiates them and, as a
+:class:`railfmu.fmus.cosim.system.ObserverSpec`), its ``class`` a registered estimator name
+(:mod:`railfmu.experiments.engine.registry`). :class:`ObserverBank` instantiates them and, as a
 sink of the master, feeds them the recorded rows — one communication step at a time inside
 the Python masters, row by row from blocks on the container path (observers are passive, so
 both see the same samples):
@@ -35,7 +36,6 @@ written as the run goes, like ``signals.csv``.
 
 from __future__ import annotations
 
-import importlib
 import math
 import sys
 import time
@@ -45,6 +45,7 @@ from pathlib import Path
 import numpy as np
 
 from railfmu.estimators.track.metrics import rms
+from railfmu.experiments.engine import registry
 from railfmu.experiments.engine.recorder import CsvRecorder
 from railfmu.fmus.cosim.system import ObserverSpec, System
 from railfmu.models.errors import UserError
@@ -54,7 +55,7 @@ _STRIDE_RTOL = 1e-9
 
 
 def make_observer(spec: ObserverSpec, step_size: float, where: str, system: System | None = None):
-    """Import ``spec.cls`` and instantiate it at its sample period with the spec's settings;
+    """Load the registered estimator ``spec.cls`` and instantiate it at its sample period with the spec's settings;
     returns ``(estimator, stride)`` (its period in system steps). A UserError if not possible.
     The setting ``process_component`` names a component of ``system`` whose FMU becomes the
     estimator's process model (``process``; :mod:`railfmu.experiments.engine.fmu_process`)."""
@@ -64,11 +65,7 @@ def make_observer(spec: ObserverSpec, step_size: float, where: str, system: Syst
     if stride < 1 or abs(stride * step_size - period) > _STRIDE_RTOL * period:
         raise UserError(f"{label}: samplePeriod {period:g} s is not a whole number of system steps "
                         f"({step_size:g} s)")
-    module_name, _, class_name = spec.cls.rpartition(".")
-    try:
-        cls = getattr(importlib.import_module(module_name), class_name)
-    except (ImportError, AttributeError, ValueError):
-        raise UserError(f"{label}: cannot import class {spec.cls!r}") from None
+    cls = registry.load(spec.cls, label)
     offline = bool(getattr(cls, "offline", False))
     if offline != spec.offline:
         raise UserError(f"{label}: {spec.cls} is an {'offline' if offline else 'online'} estimator; "

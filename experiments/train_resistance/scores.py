@@ -79,20 +79,18 @@ def regime_recognisers(system) -> dict[str, str]:
     """Per observer the regime recogniser it is scored with (:data:`railfmu.estimators.train.recognisers.RECOGNISERS`):
     its SSD setting ``regime_recogniser``, else its class attribute of that name, else the
     paper's rules (``"paper"``): each estimator is scored as its author means it to be read."""
-    import importlib
-
     from railfmu.estimators.train.recognisers import RECOGNISERS
+    from railfmu.experiments.engine import registry
 
     where = str(system.source or system.name)
     out = {}
     for o in system.observers:
         name = o.settings.get("regime_recogniser")
         if name is None:
-            module, _, cls = o.cls.rpartition(".")
-            try:
-                name = getattr(getattr(importlib.import_module(module), cls), "regime_recogniser", "paper")
-            except (ImportError, AttributeError, ValueError):
-                name = "paper"  # the observer bank names a class it cannot import
+            try:  # quiet: the observer bank warns of a deprecated path and refuses an unknown one
+                name = getattr(registry.load(o.cls, where, warn=False), "regime_recogniser", "paper")
+            except UserError:
+                name = "paper"
         if name not in RECOGNISERS:
             raise UserError(f"{where}: Observer {o.name!r}: regime_recogniser {name!r} is not one of "
                             f"{', '.join(RECOGNISERS)}")

@@ -81,7 +81,9 @@ class Connection:
 class ObserverSpec:
     """An estimator attached to the run (declared in the SSD's railfmu annotation).
 
-    ``cls`` is a dotted path ``package.module.Class``; ``measurements`` and ``inputs`` (its
+    ``cls`` is the estimator's registered name (entry-point group ``railfmu.estimators``,
+    resolved by the run engine; a registered class's dotted path is deprecated), kept as the
+    SSD writes it so that an export writes what it read; ``measurements`` and ``inputs`` (its
     known inputs) map the observer's names to recorded signals ``component.variable``;
     ``valid`` maps a measurement to a flag signal (nonzero: the measurement is there);
     ``truth`` maps estimate names to the recorded signals they are scored against (metrics
