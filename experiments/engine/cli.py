@@ -1,5 +1,7 @@
-"""railfmu command line (contract in docs/architecture.md, "Command line"): a thin layer over
-the Python API (:mod:`railfmu.experiments.engine.api`, re-exported as ``railfmu.run`` & co.).
+"""railfmu: run, study and export railway monitoring experiments (SSP systems of FMUs, with estimators as observers).
+
+The command line is a thin layer over the Python API (:mod:`railfmu.experiments.engine.api`,
+re-exported as ``railfmu.run`` & co.); its contract is in the repository's docs/cli.md.
 
 Every user error (missing file, bad parameter, bad --set) is one line on stderr and exit
 code 2; no traceback. Without ``--master``, ``run`` and ``study`` use the master the
