@@ -42,6 +42,24 @@ def test_run_csv_equals_run(recorded):
         kf.run_csv(csv_path)  # the CSV names are wheelset.ddy, ...: no column 'ddy'
 
 
+def test_run_named_equals_run(recorded):
+    """Plain arrays by channel name give the matrix run's estimates, output by output; a
+    masked channel is missing; a wrong name is one error naming it."""
+    t, Z, _, _ = recorded
+    kf = AlignmentKalmanFilter(DT)
+    X = AlignmentKalmanFilter(DT).run(t, Z)
+    named = kf.run_named(t, {"ddy": Z[:, 0], "dpsi": Z[:, 1], "ddy_f": Z[:, 2]})
+    assert list(named) == ["time", *kf.outputs]
+    assert all(np.array_equal(named[o], X[:, j]) for j, o in enumerate(kf.outputs))
+    off = np.zeros(len(t), dtype=bool)
+    masked = kf.run_named(t, {"ddy": Z[:, 0], "dpsi": Z[:, 1], "ddy_f": Z[:, 2]}, masks={"dpsi": off})
+    Z_nan = Z.copy()
+    Z_nan[:, 1] = np.nan
+    assert np.array_equal(masked["xi"], AlignmentKalmanFilter(DT).run(t, Z_nan)[:, kf.outputs.index("xi")])
+    with pytest.raises(ValueError, match=r"missing channel\(s\) \['ddy_f'\]; unknown channel\(s\) \['ddyf'\]"):
+        kf.run_named(t, {"ddy": Z[:, 0], "dpsi": Z[:, 1], "ddyf": Z[:, 2]})
+
+
 def test_run_csv_empty_cell_is_a_missing_channel(recorded, tmp_path):
     """A measured record replayed from CSV: an empty cell is a missing channel, as NaN."""
     t, Z, _, csv_path = recorded

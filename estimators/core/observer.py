@@ -30,7 +30,7 @@ from __future__ import annotations
 import csv
 import math
 from pathlib import Path
-from typing import Any, ClassVar
+from typing import Any, ClassVar, Mapping
 
 import numpy as np
 
@@ -93,6 +93,34 @@ class Estimator:
         ``U (n, len(inputs))`` (None if it has none) and the channels present ``mask`` (bool,
         like ``Z``; default: the finite values) -> estimates ``(n, len(outputs))``."""
         raise NotImplementedError
+
+    def run_named(self, t: np.ndarray, channels: Mapping[str, np.ndarray],
+                  masks: Mapping[str, np.ndarray] | None = None) -> dict[str, np.ndarray]:
+        """Offline on plain arrays named as the estimator names its channels: ``channels``
+        maps every name of ``measurements`` and ``inputs`` to an array ``(n,)`` (in ``units``;
+        NaN: missing), ``masks`` optionally a measurement name to its bool array (False:
+        missing). Returns ``{"time": t, output: (n,) ...}``. A ValueError names a missing or
+        unknown channel."""
+        names = (*self.measurements, *self.inputs)
+        missing = [n for n in names if n not in channels]
+        unknown = sorted(set(channels) - set(names)) + sorted(set(masks or {}) - set(self.measurements))
+        if missing or unknown:
+            raise ValueError(f"{type(self).__name__}.run_named: "
+                             + "; ".join(filter(None, [missing and f"missing channel(s) {missing}",
+                                                       unknown and f"unknown channel(s) {unknown}"]))
+                             + f" (measurements {self.measurements}, inputs {self.inputs})")
+        t = np.asarray(t, dtype=float)
+        column = lambda n: np.asarray(channels[n], dtype=float).reshape(-1)  # noqa: E731
+        Z = np.column_stack([column(n) for n in self.measurements]) if self._n_in else np.empty((t.size, 0))
+        U = np.column_stack([column(n) for n in self.inputs]) if self._n_u else None
+        mask = None
+        if masks:
+            mask = np.ones(Z.shape, dtype=bool)
+            for j, n in enumerate(self.measurements):
+                if n in masks:
+                    mask[:, j] = np.asarray(masks[n], dtype=bool).reshape(-1)
+        est = np.asarray(self.run(t, Z, U, mask))
+        return {"time": t, **{name: est[:, j] for j, name in enumerate(self.outputs)}}
 
     def run_csv(self, path: str | Path, columns: dict[str, str] | None = None
                 ) -> tuple[np.ndarray, np.ndarray]:
