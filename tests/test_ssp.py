@@ -503,7 +503,7 @@ def test_written_ssd_for_omsimulator(fmu_dir, tmp_path):
           "oms": "https://raw.githubusercontent.com/OpenModelica/OMSimulator/master/schema/oms.xsd"}
     annotations = doc.findall("ssd:System/ssd:Annotations/ssc:Annotation", ns)
     assert [a.get("type") for a in annotations] == ["org.openmodelica", "org.railfmu.observers",
-                                                    "org.railfmu.recorder"]
+                                                    "org.railfmu.study", "org.railfmu.recorder"]
     (master,) = annotations[0].findall("oms:Annotations/oms:SimulationInformation/oms:FixedStepMaster", ns)
     assert master.get("description") == "oms-ma" and float(master.get("stepSize")) == 5e-4
     assert b"<oms:FixedStepMaster" in text  # OMSimulator (pugixml) matches the prefix literally

@@ -225,7 +225,7 @@ BAD = {  # file text -> the one error line's tail
     "missing-column": ("time_s,position_m\n0,0\n10,100\n",
                        "line 1: no column 'speed_kmh' (named by parameter column_2); the header has: time_s, position_m"),
     "non-monotonic": ("time_s,position_m,speed_kmh\n0,0,0\n10,100,30\n5,200,40\n",
-                      "line 4, column 1 (time): 5 is before the previous row's time 10 (times must increase strictly)"),
+                      "line 4, column 1 (time_s): 5 is before the previous row's time 10 (times must increase strictly)"),
     "nan": ("time_s,position_m,speed_kmh\n0,0,0\n10,nan,30\n",
             "line 3, column 2 (position_m): 'nan' is not a finite number"),
     "text": ("time_s,position_m,speed_kmh\n0,0,0\n10,12 m,30\n",
