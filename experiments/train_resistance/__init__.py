@@ -41,6 +41,7 @@ import numpy as np
 from railfmu.experiments.engine.study_protocol import RunData, Study, observers_md
 from railfmu.experiments.train_resistance.scores import (
     finite_or_none,
+    hold_offline,
     format_or_dash,
     DEFAULT_VARIANT,
     estimators_of,
@@ -84,7 +85,7 @@ class TrainResistance(Study):
         return roles
 
     def metrics(self, run: RunData) -> dict:
-        sig, est, roles = run.signals, run.estimates, run.roles
+        sig, est, roles = run.signals, hold_offline(run.estimates), run.roles
         t = np.asarray(est["time"])
         n = len(t)
         fixes_all = np.flatnonzero(np.asarray(sig[roles["fix"]])[:n] != 0)
@@ -143,7 +144,7 @@ class TrainResistance(Study):
         fixes the position and GNSS speed (Fig. 2); per estimator the traction power samples
         of the initial acceleration (mid speed in km/h, power in W; Fig. 9) and the braking
         samples (mid speed, deceleration, ATB-EG step; Fig. 8) of its recognised regimes."""
-        sig, est, roles = run.signals, run.estimates, run.roles
+        sig, est, roles = run.signals, hold_offline(run.estimates), run.roles
         n = len(est["time"])
         fixes = np.flatnonzero(np.asarray(sig[roles["fix"]])[:n] != 0)
         out = {"position": sig[roles["gnss_position"]][fixes], "speed_kmh": sig[roles["gnss_speed"]][fixes] / KMH}
@@ -163,6 +164,7 @@ class TrainResistance(Study):
     def figures(self, run: RunData, out: Path) -> list[str]:
         from railfmu.experiments.train_resistance import figures
 
+        hold_offline(run.estimates)
         return figures.run_figures(run, out)
 
     def report_md(self, metrics: dict) -> str:
