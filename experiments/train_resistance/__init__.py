@@ -108,6 +108,9 @@ class TrainResistance(Study):
             }
             if f"{name}.acceleration" in est and f"{name}.effort" in est and len(fixes_all) >= 2:
                 out[name].update(regime_scores(run, name, fixes_all)[0])
+            cov = getattr(run.observers.get(name), "theta_cov", None) if run.observers else None
+            if cov is not None:  # the run's posterior on r0-r2, for the fleet's pooling
+                out[name]["theta_cov"] = np.asarray(cov, float).tolist()
         out["truth"] = self._truth(run, r_true)
         return out
 
@@ -263,6 +266,19 @@ class TrainResistance(Study):
         L += ["", "The paper's resistance is that of a VIRM-VI; ours is the published KISS Davis law (the "
               "estimators start from it), so compare spreads, not values. Truth: the driver's style and the "
               "paper's regime definitions on its exact 1 s steps."]
+        return "\n".join(L)
+
+    def study_tables(self, table: dict, series: dict) -> str:
+        """Fleet calibration (:func:`railfmu.experiments.train_resistance.fleet.fleet_table`) of every
+        variant whose runs carry a posterior covariance: each variant's runs taken as the runs of
+        one unit, in seed order; added to the table as ``fleet``."""
+        from railfmu.experiments.train_resistance.fleet import fleet_md, fleet_table
+
+        L = []
+        for variant, t in table.items():
+            for name, f in fleet_table(t["runs"]).items():
+                t.setdefault("fleet", {})[name] = f
+                L.append(fleet_md(variant, name, f))
         return "\n".join(L)
 
     def study_figures(self, table: dict, series: dict, out: Path) -> list[str]:
