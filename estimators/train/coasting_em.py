@@ -92,6 +92,7 @@ class CoastingEM(OfflineObserver):
         self.line = LineTerm(p.line_file, p.rotating_mass_factor)
         self.theta0 = np.array([p.r0_init, p.r1_init, p.r2_init])
         self._W = p.recognition_window * (1.0 - 1e-9)
+        self.prior_cov = np.diag((p.prior_rel_sigma * self.theta0) ** 2)  # the fit's prior (C3)
         self.diag: dict = {}
 
     # -- the record's fixes and sums ----------------------------------------------------------
@@ -161,7 +162,7 @@ class CoastingEM(OfflineObserver):
     def _fit(self, segs: list[tuple[int, int]]) -> tuple[np.ndarray, np.ndarray]:
         """(C3) with the wide prior: (theta^, its covariance)."""
         p = self.config
-        L0 = np.diag((p.prior_rel_sigma * self.theta0) ** -2.0)
+        L0 = np.linalg.inv(self.prior_cov)
         A, b = L0.copy(), L0 @ self.theta0
         for f0, f1 in segs:
             Ai, bi = coasting_information(self.t[f0:f1 + 1], self.v[f0:f1 + 1], self.g[f0:f1], p.sigma_speed)

@@ -108,9 +108,11 @@ class TrainResistance(Study):
             }
             if f"{name}.acceleration" in est and f"{name}.effort" in est and len(fixes_all) >= 2:
                 out[name].update(regime_scores(run, name, fixes_all)[0])
-            cov = getattr(run.observers.get(name), "theta_cov", None) if run.observers else None
-            if cov is not None:  # the run's posterior on r0-r2, for the fleet's pooling
-                out[name]["theta_cov"] = np.asarray(cov, float).tolist()
+            obs = run.observers.get(name) if run.observers else None
+            if getattr(obs, "prior_cov", None) is not None:  # the run's posterior and prior, for the fleet
+                out[name]["theta_cov"] = np.asarray(obs.theta_cov, float).tolist()
+                out[name]["theta_prior"] = np.asarray(obs.theta0, float).tolist()
+                out[name]["theta_prior_cov"] = np.asarray(obs.prior_cov, float).tolist()
         out["truth"] = self._truth(run, r_true)
         return out
 

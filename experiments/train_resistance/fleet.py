@@ -25,7 +25,8 @@ def fleet_table(runs: dict) -> dict:
         ok = [s for s in seeds if "theta_cov" in runs[s].get(n, {})]
         th = [np.array([runs[s][n][f"r{i}_final"] for i in range(3)]) for s in ok]
         cov = [np.array(runs[s][n]["theta_cov"]) for s in ok]
-        res = change_test(th, cov)
+        first = runs[ok[0]][n]  # the prior each run holds once (F1)
+        res = change_test(th, cov, first.get("theta_prior"), first.get("theta_prior_cov"))
         v = FLEET_SPEEDS_KMH * KMH
         r, sd = resistance_band(res["theta"], res["cov"], v)
         tr = runs[ok[-1]]["truth"]
