@@ -144,6 +144,25 @@ def test_fmu_equals_python_bit_for_bit(sensors_fmu):
         assert np.array_equal(y[i - 1], twin[f"y_{i}"]), i
 
 
+def test_log_uniform_distribution_fmu_equals_python(sensors_fmu):
+    """distribution_i = 1: y_i = gain_i u_i + bias_i exp(sigma_i (2 u2 - 1)), the C equal to the
+    twin bit for bit, every draw within [bias e^-sigma, bias e^sigma], log-uniform (mean of
+    ln y/bias near 0, std near sigma / sqrt(3)); the other channels stay Gaussian."""
+    params = {**SIGMAS, **{f"bias_{i}": 0.1 * i for i in CH}, "sigma_4": math.log(2.0), "sigma_5": 0.3,
+              "distribution_4": 1, "distribution_5": 1, "seed": 7, "sample_period": 1e-3}
+    t = np.arange(5000) * 1e-3
+    u = np.array([np.cos(2 * np.pi * (i + 1) * t) for i in range(N_CHANNELS)]).T
+    with Slave(sensors_fmu, "s") as s:
+        s.initialize(0.0, None, params)
+        fmu = _drive(s, t, u)
+    twin = SensorNoise(params).outputs(t, 1e-3, {f"u_{i}": u[:, i - 1] for i in CH})
+    for i in CH:
+        assert np.array_equal(fmu[:, i - 1], twin[f"y_{i}"]), i
+    x = np.log((fmu[:, 3] - u[:, 3]) / 0.4)
+    assert x.min() >= -math.log(2.0) and x.max() < math.log(2.0)
+    assert abs(x.mean()) < 0.03 and abs(x.std() - math.log(2.0) / math.sqrt(3.0)) < 0.02
+
+
 def test_noise_statistics(sensors_fmu):
     """20000 samples per channel (20 s at 1 kHz): zero mean and std sigma within 3 standard
     errors, lag-1 autocorrelation |r| < 0.03 (its standard error is 0.007), channels

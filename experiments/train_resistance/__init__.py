@@ -41,6 +41,7 @@ import numpy as np
 from railfmu.experiments.engine.study_protocol import RunData, Study, observers_md
 from railfmu.experiments.train_resistance.scores import (
     finite_or_none,
+    hold_offline,
     format_or_dash,
     DEFAULT_VARIANT,
     estimators_of,
@@ -84,7 +85,7 @@ class TrainResistance(Study):
         return roles
 
     def metrics(self, run: RunData) -> dict:
-        sig, est, roles = run.signals, run.estimates, run.roles
+        sig, est, roles = run.signals, hold_offline(run.estimates), run.roles
         t = np.asarray(est["time"])
         n = len(t)
         fixes_all = np.flatnonzero(np.asarray(sig[roles["fix"]])[:n] != 0)
@@ -107,6 +108,11 @@ class TrainResistance(Study):
             }
             if f"{name}.acceleration" in est and f"{name}.effort" in est and len(fixes_all) >= 2:
                 out[name].update(regime_scores(run, name, fixes_all)[0])
+            obs = run.observers.get(name) if run.observers else None
+            if getattr(obs, "prior_cov", None) is not None:  # the run's posterior and prior, for the fleet
+                out[name]["theta_cov"] = np.asarray(obs.theta_cov, float).tolist()
+                out[name]["theta_prior"] = np.asarray(obs.theta0, float).tolist()
+                out[name]["theta_prior_cov"] = np.asarray(obs.prior_cov, float).tolist()
         out["truth"] = self._truth(run, r_true)
         return out
 
@@ -143,7 +149,7 @@ class TrainResistance(Study):
         fixes the position and GNSS speed (Fig. 2); per estimator the traction power samples
         of the initial acceleration (mid speed in km/h, power in W; Fig. 9) and the braking
         samples (mid speed, deceleration, ATB-EG step; Fig. 8) of its recognised regimes."""
-        sig, est, roles = run.signals, run.estimates, run.roles
+        sig, est, roles = run.signals, hold_offline(run.estimates), run.roles
         n = len(est["time"])
         fixes = np.flatnonzero(np.asarray(sig[roles["fix"]])[:n] != 0)
         out = {"position": sig[roles["gnss_position"]][fixes], "speed_kmh": sig[roles["gnss_speed"]][fixes] / KMH}
@@ -163,6 +169,7 @@ class TrainResistance(Study):
     def figures(self, run: RunData, out: Path) -> list[str]:
         from railfmu.experiments.train_resistance import figures
 
+        hold_offline(run.estimates)
         return figures.run_figures(run, out)
 
     def report_md(self, metrics: dict) -> str:
@@ -261,6 +268,19 @@ class TrainResistance(Study):
         L += ["", "The paper's resistance is that of a VIRM-VI; ours is the published KISS Davis law (the "
               "estimators start from it), so compare spreads, not values. Truth: the driver's style and the "
               "paper's regime definitions on its exact 1 s steps."]
+        return "\n".join(L)
+
+    def study_tables(self, table: dict, series: dict) -> str:
+        """Fleet calibration (:func:`railfmu.experiments.train_resistance.fleet.fleet_table`) of every
+        variant whose runs carry a posterior covariance: each variant's runs taken as the runs of
+        one unit, in seed order; added to the table as ``fleet``."""
+        from railfmu.experiments.train_resistance.fleet import fleet_md, fleet_table
+
+        L = []
+        for variant, t in table.items():
+            for name, f in fleet_table(t["runs"]).items():
+                t.setdefault("fleet", {})[name] = f
+                L.append(fleet_md(variant, name, f))
         return "\n".join(L)
 
     def study_figures(self, table: dict, series: dict, out: Path) -> list[str]:

@@ -52,6 +52,22 @@ PAPER = {
 }
 
 
+def hold_offline(estimates: dict) -> dict:
+    """``estimates`` with every column shorter than the online rows (an offline observer's,
+    on its own sample rows: every ``stride``-th row from the first) held to each online row
+    (zero-order hold; the observer's rows are the online rows ``0, stride, 2 stride, ...``), in
+    place, so that the study scores online and offline estimators alike."""
+    n = len(estimates["time"])
+    for c, x in list(estimates.items()):
+        m = len(x)
+        if c == "time" or m >= n or m < 2:
+            continue
+        stride = -(-n // m)
+        if (m - 1) * stride < n <= m * stride:
+            estimates[c] = np.asarray(x)[np.arange(n) // stride]
+    return estimates
+
+
 def estimators_of(estimates: dict) -> list[str]:
     """Every observer that estimates s, v, r0, r1, r2 (online: one row per recorded row)."""
     names = [c[:-3] for c in estimates if c.endswith(".r0")]

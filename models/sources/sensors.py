@@ -13,7 +13,8 @@ For channel ``i = 1..8``, with ``t0`` the start time (fmi2SetupExperiment), ``T`
 initialisation mode)::
 
     k     = floor((t - t0) / T + eps min(h / T, 1))         sample index (k >= 0)
-    y_i   = gain_i u_i + bias_i + sigma_i w_i(k)            enabled = true
+    y_i   = gain_i u_i + bias_i + sigma_i w_i(k)            enabled = true, distribution_i = 0
+    y_i   = gain_i u_i + bias_i exp(sigma_i (2 u2_i(k) - 1))  enabled = true, distribution_i = 1
     y_i   = u_i                                             enabled = false (exactly)
     eps   = STEP_TOLERANCE = 0.01
 
@@ -21,6 +22,13 @@ evaluated at every communication point (and in initialisation mode). The noise i
 sample period: a communication step shorter than ``T`` sees the same ``w_i(k)``; a longer one
 skips samples. ``w_i = 0`` when ``sigma_i = 0``. ``y_i`` depends directly on ``u_i`` only
 (declared in the ModelStructure).
+
+``distribution_i = 1`` makes channel i a log-uniform scatter of its bias instead of additive
+Gaussian noise: ``bias_i`` is the geometric centre and ``sigma_i`` the half-width of the
+uniform interval of ``ln(y_i / bias_i)`` (at ``u_i = 0``), ``u2_i(k)`` the uniform of
+channel i's stream at sample k below (the one Box-Muller's cosine reads): ``sigma_i = ln 2``
+draws ``y_i`` between ``bias_i / 2`` and ``2 bias_i``, every ratio scale equally likely (an
+unknown vehicle's Davis coefficient; held over a run by a long ``sample_period``).
 
 Sample instants and the master's clock: ``k`` counts the sample instants ``t0 + j T`` reached
 at ``t``, and an instant that lies less than ``eps min(h, T)`` after ``t`` counts as reached.
@@ -72,6 +80,8 @@ Parameters
 name           unit   default source
 ============== ====== ======= =========================================================
 sigma_1..8     (u_i)  0       standard deviation of the white noise; presets below
+                              (distribution_i = 1: half-width of ln y_i / bias_i, 1)
+distribution_1..8 --  0       0 Gaussian white noise, 1 log-uniform scatter of bias_i (Integer)
 gain_1..8      1      1       scale factor of the sensor (calibration error)
 bias_1..8      (u_i)  0       offset of the sensor
 seed           1      1       seed of the noise (Integer)
@@ -150,6 +160,13 @@ def noise(seed: int, channel: int, k, exact: bool = True) -> np.ndarray:
     return np.sqrt(-2.0 * lg) * cs
 
 
+def log_uniform_factor(seed: int, channel: int, k, sigma: float) -> np.ndarray:
+    """exp(sigma (2 u2 - 1)) of ``channel`` at samples ``k``: the factor on bias_i of
+    ``distribution_i = 1``, bit-identical to the FMU (libm's exp)."""
+    u2 = uniforms(seed, channel, k)[1]
+    return _libm(math.exp, sigma * (2.0 * u2 - 1.0))
+
+
 def sample_index(t, t0: float, sample_period: float, h) -> np.ndarray:
     """k = floor((t - t0) / T + eps min(h / T, 1)), clipped at 0: the FMU's sample at
     communication points ``t`` (s) reached by steps ``h`` (s; scalar or one per point, 0 in
@@ -186,6 +203,10 @@ class SensorNoise:
                 out[f"y_{i}"] = ui.copy()
                 continue
             sigma = p[f"sigma_{i}"]
+            if p[f"distribution_{i}"] == 1:
+                f = log_uniform_factor(p["seed"], i, k, sigma) if sigma != 0 else np.ones(t.shape)
+                out[f"y_{i}"] = p[f"gain_{i}"] * ui + p[f"bias_{i}"] * f
+                continue
             w = noise(p["seed"], i, k, exact) if sigma != 0 else np.zeros(t.shape)
             out[f"y_{i}"] = p[f"gain_{i}"] * ui + p[f"bias_{i}"] + sigma * w
         return out
@@ -206,6 +227,9 @@ def _parameters() -> list[Parameter]:
                     source="choice: ideal sensor") for i in ch],
         *[Parameter(f"bias_{i}", f"offset of channel {i}, in the unit of u_{i}", "", 0.0,
                     source="choice: ideal sensor") for i in ch],
+        *[Parameter(f"distribution_{i}", f"channel {i}: 0 Gaussian white noise sigma_{i} w, 1 log-uniform "
+                    f"scatter bias_{i} exp(sigma_{i} (2 u - 1))", "", 0, type="Integer", min=0, max=1,
+                    source="choice: 0 a sensor; 1 an unknown parameter drawn per run") for i in ch],
         Parameter("seed", "seed of the counter-based noise (same seed, same noise in any importer)",
                   "", 1, type="Integer", source="choice"),
         Parameter("sample_period", "sensor sample period: the noise is held for this long (> 0)", "s",

@@ -42,4 +42,10 @@ static inline double rng_normal(uint64_t seed, uint64_t stream, uint64_t k) {
     return sqrt(-2.0 * log(u1)) * cos(2.0 * RNG_PI * u2);
 }
 
+/* u2 of rng_normal(seed, stream, k), [0, 1): the uniform a log-uniform draw reads */
+static inline double rng_uniform2(uint64_t seed, uint64_t stream, uint64_t k) {
+    const uint64_t c = rng_mix64(seed + stream * RNG_GAMMA);
+    return rng_unit(rng_mix64(c + (2 * k + 2) * RNG_GAMMA));
+}
+
 #endif

@@ -4,6 +4,7 @@
  *
  *   k   = floor((t - t0) / T + STEP_TOLERANCE min(h / T, 1))    T = sample_period
  *   y_i = gain_i u_i + bias_i + sigma_i w_i(k)      (y_i = u_i when enabled is false)
+ *   y_i = gain_i u_i + bias_i exp(sigma_i (2 u2_i(k) - 1))   distribution_i = 1 (log-uniform)
  *
  * w_i(k) is counter-based Gaussian white noise: a pure function of (seed, i, k) built from
  * the SplitMix64 output function and Box-Muller, so it needs no generator state (FMU state
@@ -33,6 +34,9 @@ static const fmi2ValueReference VR_SIGMA[N_CHANNELS] = {
     VR_sigma_1, VR_sigma_2, VR_sigma_3, VR_sigma_4, VR_sigma_5, VR_sigma_6, VR_sigma_7, VR_sigma_8};
 static const fmi2ValueReference VR_GAIN[N_CHANNELS] = {
     VR_gain_1, VR_gain_2, VR_gain_3, VR_gain_4, VR_gain_5, VR_gain_6, VR_gain_7, VR_gain_8};
+static const fmi2ValueReference VRI_DIST[N_CHANNELS] = {
+    VRI_distribution_1, VRI_distribution_2, VRI_distribution_3, VRI_distribution_4,
+    VRI_distribution_5, VRI_distribution_6, VRI_distribution_7, VRI_distribution_8};
 static const fmi2ValueReference VR_BIAS[N_CHANNELS] = {
     VR_bias_1, VR_bias_2, VR_bias_3, VR_bias_4, VR_bias_5, VR_bias_6, VR_bias_7, VR_bias_8};
 
@@ -95,8 +99,14 @@ int model_outputs(ModelInstance *m) {
     seed = (uint64_t)(int64_t)m->i[VRI_seed]; /* two's complement, as the Python */
     for (j = 0; j < N_CHANNELS; j++) {
         const double sigma = r[VR_SIGMA[j]];
-        const double w = sigma != 0 ? rng_normal(seed, (uint64_t)(j + 1), k) : 0.0;
-        r[VR_Y[j]] = r[VR_GAIN[j]] * r[VR_U[j]] + r[VR_BIAS[j]] + sigma * w;
+        if (m->i[VRI_DIST[j]] == 1) { /* log-uniform scatter of the bias: u2 of the stream */
+            const double f = sigma != 0 ? exp(sigma * (2.0 * rng_uniform2(seed, (uint64_t)(j + 1), k) - 1.0))
+                                        : 1.0;
+            r[VR_Y[j]] = r[VR_GAIN[j]] * r[VR_U[j]] + r[VR_BIAS[j]] * f;
+        } else {
+            const double w = sigma != 0 ? rng_normal(seed, (uint64_t)(j + 1), k) : 0.0;
+            r[VR_Y[j]] = r[VR_GAIN[j]] * r[VR_U[j]] + r[VR_BIAS[j]] + sigma * w;
+        }
     }
     return 0;
 }
