@@ -483,7 +483,7 @@ def test_observer_binds_as_an_ssd_observer():
     assert all(OURS.get(u) is not None for u in obs.units.values())
     assert set(obs.units) == {*INCREMENTS, *NAV}
     spec.settings["alignment"] = "fine"
-    with pytest.raises(UserError, match="bad settings: StrapdownINS: alignment must be"):
+    with pytest.raises(UserError, match="bad settings: StrapdownINS: setting alignment must be one of"):
         make_observer(spec, DT, "trolley_survey")
 
 
