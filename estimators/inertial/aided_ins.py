@@ -186,7 +186,6 @@ from railfmu.estimators.core import kalman
 from railfmu.estimators.core.settings import Settings, number_or_inf, setting
 from railfmu.estimators.inertial.aiding import (
     AIDINGS,
-    NHC_SIGMA_SHAPING,  # noqa: F401 (re-exported)
     EpochBlock,
     Landmark,
     Measurement,
