@@ -431,20 +431,23 @@ def test_speed(record):
 
 
 @pytest.mark.parametrize("settings, message", [
-    ({"error_model": "full12"}, "error_model must be one of paper12, full15, not 'full12'"),
-    ({"zupt_source": "radar"}, "zupt_source must be one of flag, detector"),
+    ({"error_model": "full12"}, "setting error_model must be one of 'paper12', 'full15', not 'full12'"),
+    ({"zupt_source": "radar"}, "setting zupt_source must be one of 'flag', 'detector'"),
     ({"filter_period": 0.0123}, "filter_period 0.0123 s is not a whole number of IMU steps"),
-    ({"zupt_sigma": 0.0}, "zupt_sigma must be > 0"),
-    ({"nhc": "yes"}, "nhc must be true or false"),
-    ({"tilt_sigma": -1.0}, "tilt_sigma must be >= 0"),
-    ({"heading": "north"}, "heading must be a number"),
-    ({"gyro_arw_deg_sqrt_h": math.inf}, "gyro_arw_deg_sqrt_h must be finite"),
-    ({"bogus": 1}, "unknown setting(s) ['bogus']"),
-    ({"play_model": "pink"}, "play_model must be one of white, shaping, not 'pink'"),
-    ({"play_wavelength": 0.0}, "play_wavelength must be > 0"),
-    ({"play_damping": -0.5}, "play_damping must be > 0"),
-    ({"play_sigma_lateral": -1e-3}, "play_sigma_lateral must be >= 0"),
-    ({"play_sigma_vertical": "1 mm"}, "play_sigma_vertical must be a number"),
+    ({"zupt_sigma": 0.0}, "setting zupt_sigma must be > 0 m/s"),
+    ({"nhc": "perhaps"}, "setting nhc = 'perhaps' must be true or false"),
+    ({"tilt_sigma": -1.0}, "setting tilt_sigma must be >= 0 rad"),
+    ({"heading": "north"}, "setting heading = 'north' is not a number"),
+    ({"gyro_arw_deg_sqrt_h": math.inf}, "setting gyro_arw_deg_sqrt_h = inf is not a finite number"),
+    ({"gyro_bias_correlation_time": 0.0}, "setting gyro_bias_correlation_time must be > 0 s"),
+    ({"zupt_interval": "never"}, "setting zupt_interval = 'never' is not a number (or inf)"),
+    ({"bogus": 1}, "unknown setting 'bogus'"),
+    ({"zupt_sigam": 1e-4}, "unknown setting 'zupt_sigam' (closest: zupt_sigma"),
+    ({"play_model": "pink"}, "setting play_model must be one of 'white', 'shaping', not 'pink'"),
+    ({"play_wavelength": 0.0}, "setting play_wavelength must be > 0 m"),
+    ({"play_damping": -0.5}, "setting play_damping must be > 0"),
+    ({"play_sigma_lateral": -1e-3}, "setting play_sigma_lateral must be >= 0 m"),
+    ({"play_sigma_vertical": "1 mm"}, "setting play_sigma_vertical = '1 mm' is not a number"),
 ])
 def test_bad_settings_are_one_line(settings, message):
     with pytest.raises(ValueError) as info:

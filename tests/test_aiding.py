@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from railfmu.estimators.inertial import aiding
-from railfmu.estimators.inertial.aided_ins import MEASUREMENTS, AidedInsSmoother, FilterModel, check_settings
+from railfmu.estimators.inertial.aided_ins import MEASUREMENTS, AidedInsSettings, AidedInsSmoother, FilterModel
 from railfmu.estimators.inertial.aiding import (
     AIDINGS,
     Aiding,
@@ -29,7 +29,7 @@ LAT = 0.5
 
 
 def _record(n_epochs: int = 6, **settings) -> Record:
-    s = check_settings("test", settings)
+    s = AidedInsSettings.from_mapping(settings, "test")
     idx = np.arange(n_epochs) * 10
     Z = np.full((idx[-1] + 1, len(MEASUREMENTS)), np.nan)
     zupt = np.zeros(n_epochs, dtype=bool)
@@ -71,7 +71,7 @@ def test_a_held_landmark_fix_is_used_once_and_the_last_of_a_chunk_wins():
 
 
 def test_rows_and_stack():
-    s = check_settings("test", {"nhc": True, "odometer": True})
+    s = AidedInsSettings.from_mapping({"nhc": True, "odometer": True}, "test")
     model = FilterModel(s)
     C = np.repeat(np.eye(3)[None], 2, axis=0)
     vel = np.array([[1.0, 0.01, -0.02], [1.0, 0.0, 0.0]])

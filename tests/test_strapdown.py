@@ -374,11 +374,11 @@ def test_observer_initial_errors_and_settings():
     C = dcm_from_rph(0.01, -0.02, 45 * DEG)
     np.testing.assert_allclose(attitude_error(obs.run(np.zeros(1), np.empty((1, 0)), np.zeros((1, 6)))[0], C),
                                [TILT, 0, HEADING], atol=1e-15)
-    with pytest.raises(ValueError, match="unknown setting"):
+    with pytest.raises(ValueError, match=r"unknown setting 'lattitude' \(closest: latitude"):
         StrapdownINS(DT, lattitude=0.5)
-    with pytest.raises(ValueError, match="alignment must be"):
+    with pytest.raises(ValueError, match="setting alignment must be one of 'given', 'coarse', not 'fine'"):
         StrapdownINS(DT, alignment="fine")
-    with pytest.raises(ValueError, match="height must be a finite number"):
+    with pytest.raises(ValueError, match="setting height = nan is not a finite number"):
         StrapdownINS(DT, height=float("nan"))
 
 
@@ -483,7 +483,7 @@ def test_observer_binds_as_an_ssd_observer():
     assert all(OURS.get(u) is not None for u in obs.units.values())
     assert set(obs.units) == {*INCREMENTS, *NAV}
     spec.settings["alignment"] = "fine"
-    with pytest.raises(UserError, match="bad settings: StrapdownINS: alignment must be"):
+    with pytest.raises(UserError, match="bad settings: StrapdownINS: setting alignment must be one of"):
         make_observer(spec, DT, "trolley_survey")
 
 

@@ -163,3 +163,17 @@ def _check_range(m: Mapping[str, Any], name: str, value: Any, where: str) -> Non
             if m.get(key) is not None and isinstance(v, (int, float)) and not ok(m[key]):
                 raise ValueError(f"{where}: setting {name} must be {text} {m[key]:g}"
                                  f"{' ' + m['unit'] if m['unit'] else ''}, not {value!r}")
+
+
+def number_or_inf(raw: Any) -> float:
+    """A ``convert`` for a number that may be infinite (``inf``, also as text: "no limit",
+    e.g. a random constant's correlation time); NaN and bools refused."""
+    if isinstance(raw, bool):
+        raise ValueError("is not a number")
+    try:
+        value = float(raw.strip() if isinstance(raw, str) else raw)
+    except (TypeError, ValueError):
+        raise ValueError("is not a number (or inf)") from None
+    if math.isnan(value):
+        raise ValueError("is not a number (or inf)")
+    return value

@@ -154,47 +154,22 @@ After :meth:`AidedInsSmoother.run`: ``epoch_times``, ``P_filter``, ``P_smoothed`
 :func:`covariance_analysis`), ``zupt_epochs``, ``filter_seconds``, ``smoother_seconds``,
 ``strapdown_seconds``; :meth:`~AidedInsSmoother.finish` gives the times and the update counts.
 
-Settings (all optional; SSD ``rf:Setting`` or keyword arguments):
+Settings (all optional; SSD ``rf:Setting`` or keyword arguments): :class:`AidedInsSettings`, as
+``self.config``, composed of the blocks (each field with its unit, default, one-line doc and
+checks; ``AidedInsSettings.describe()`` lists them):
 
-=============================  ======  ==========================================================
-``latitude, longitude``        rad     initial true position (bound to the trolley's first sample)
-``height``                     m       initial true height
-``vn, ve, vd``                 m/s     initial true velocity
-``roll, pitch, heading``       rad     initial true attitude
-``tilt_error_north/east``      rad     initial attitude error as ``StrapdownINS``: the INS starts
-``heading_error``              rad     at ``exp([e x]) C_true`` (``e = -phi``)
-``velocity_error_north/east/   m/s     added to the initial velocity
-down``
-``tilt_sigma``                 rad     P0 of phi_N, phi_E (default 0.006 deg)
-``heading_sigma``              rad     P0 of phi_D (0.06 deg)
-``velocity_sigma``             m/s     P0 of dv (1e-4)
-``position_sigma``             m       P0 of dr (0.1)
-``gyro_arw_deg_sqrt_h`` ...    grade   the IMU grade in the ``ImuErrors`` names and units
-                                       (``ImuGrade``; default navigation grade)
-``error_model``                --      ``"paper12"`` (default) or ``"full15"``
-``filter_period``              s       KF epoch (0.05; a whole number of IMU steps)
-``feedback``                   bool    closed-loop error feedback (default true)
-``zupt``                       bool    zero-velocity updates (true)
-``zupt_sigma``                 m/s     1e-4
-``zupt_interval``              s       0: every stopped epoch; inf: one per stop
-``zupt_source``                --      ``"flag"`` (the ``stopped`` measurement) or ``"detector"``
-``nhc``, ``nhc_sigma``         -, m/s  non-holonomic constraint (false; 1e-3, with ``play_model=
-                                       "shaping"`` 1e-4: only what the play model leaves out)
-``play_model``                 --      the body's cross-track velocity in the NHC: ``"white"``
-                                       (default: noise of ``nhc_sigma``) or ``"shaping"`` (the
-                                       wheel-rail play as four states, :mod:`railfmu.estimators.inertial.rail_play`)
-``play_sigma_lateral``         m       stationary sigma of the lateral play (1e-3; a sinusoid of
-                                       amplitude ``a``: ``a / sqrt(2)``)
-``play_sigma_vertical``        m       stationary sigma of the vertical play (5e-4)
-``play_wavelength``            m       the play's natural wavelength ``2 pi / k`` (2.0)
-``play_damping``               -       the play oscillator's damping ``zeta`` (``1/sqrt(2)``;
-                                       smaller: a narrower spectrum about the wavelength)
-``odometer``,                  -, m/s  odometer speed (false, 1e-3)
-``odometer_sigma``
-``landmarks``,                 -, m    landmark position fixes (false, 0.1)
-``landmark_sigma``
-``memory_budget_mb``           MB      RAM for the record before spilling to disk (320)
-=============================  ======  ==========================================================
+* :class:`~railfmu.estimators.inertial.ins_observer.InitialState`: the true initial state and the
+  INS's initial attitude error (rad, m, m/s; as ``StrapdownINS``), and
+  :class:`SmootherCore`: the initial velocity error, the P0 sigmas, ``error_model``,
+  ``filter_period``, ``feedback``, ``memory_budget_mb``;
+* :class:`ImuGradeSettings`: the IMU grade in the ``ImuErrors`` names and datasheet units
+  (deg/sqrt(h), deg/h, µg/sqrt(Hz), µg: :class:`ImuGrade` turns them into SI);
+* one block per aiding of :data:`~railfmu.estimators.inertial.aiding.AIDINGS` (its
+  ``settings``): ``zupt*``, ``nhc*`` with the ``play_*`` of the play model, ``odometer*``,
+  ``landmark*``.
+
+Angles are in rad: the SSDs bind the initial state to the trolley's signals (rad) and the
+variants give the initial errors in rad; the paper's 0.006 deg / 0.06 deg are the P0 defaults.
 """
 
 from __future__ import annotations
@@ -202,12 +177,13 @@ from __future__ import annotations
 import math
 import tempfile
 import time
-from dataclasses import fields
+from dataclasses import dataclass, fields
 from typing import Any, ClassVar
 
 import numpy as np
 
 from railfmu.estimators.core import kalman
+from railfmu.estimators.core.settings import Settings, number_or_inf, setting
 from railfmu.estimators.inertial.aiding import (
     AIDINGS,
     EpochBlock,
@@ -231,9 +207,9 @@ from railfmu.estimators.inertial.ins_error_model import (
     corrected_position,
     skews,
 )
-from railfmu.estimators.inertial.ins_observer import INCREMENTS
+from railfmu.estimators.inertial.ins_observer import INCREMENTS, InitialState
 from railfmu.estimators.core.observer import OfflineObserver
-from railfmu.estimators.inertial.rail_play import BUTTERWORTH, RailPlay
+from railfmu.estimators.inertial.rail_play import RailPlay
 from railfmu.estimators.inertial.strapdown import NAV, Strapdown
 from railfmu.models import earth
 
@@ -245,64 +221,62 @@ _GRADE_NAMES = tuple(f.name for f in fields(ImuGrade))
 #: KF epochs per block of the forward pass (feedback at the end of each)
 BLOCK = 20
 
-_DEFAULTS: dict[str, Any] = {
-    "latitude": 0.0, "longitude": 0.0, "height": 0.0, "vn": 0.0, "ve": 0.0, "vd": 0.0,
-    "roll": 0.0, "pitch": 0.0, "heading": 0.0,
-    "tilt_error_north": 0.0, "tilt_error_east": 0.0, "heading_error": 0.0,
-    "velocity_error_north": 0.0, "velocity_error_east": 0.0, "velocity_error_down": 0.0,
-    "tilt_sigma": 0.006 * DEG, "heading_sigma": 0.06 * DEG, "velocity_sigma": 1e-4, "position_sigma": 0.1,
-    **{f.name: f.default for f in fields(ImuGrade)},
-    "error_model": "paper12", "filter_period": 0.05, "feedback": True,
-    "zupt": True, "zupt_sigma": 1e-4, "zupt_interval": 0.0, "zupt_source": "flag",
-    "nhc": False, "nhc_sigma": 1e-3, "odometer": False, "odometer_sigma": 1e-3,
-    "landmarks": False, "landmark_sigma": 0.1, "memory_budget_mb": 320.0,
-    "play_model": "white", "play_sigma_lateral": 1e-3, "play_sigma_vertical": 5e-4, "play_wavelength": 2.0,
-    "play_damping": BUTTERWORTH,
-}
-#: the NHC's sigma when the play is modelled (``play_model="shaping"``): only the unmodelled rest
-NHC_SIGMA_SHAPING = 1e-4
-_BOOLS = ("feedback", "zupt", "nhc", "odometer", "landmarks")
-_CHOICES = {"error_model": ("paper12", "full15"), "zupt_source": ("flag", "detector"),
-            "play_model": ("white", "shaping")}
-_POSITIVE = ("filter_period", "zupt_sigma", "nhc_sigma", "odometer_sigma", "landmark_sigma", "memory_budget_mb",
-             "play_wavelength", "play_damping")
-_NONNEGATIVE = ("tilt_sigma", "heading_sigma", "velocity_sigma", "position_sigma", "play_sigma_lateral",
-                "play_sigma_vertical")
+_GRADE = ImuGrade()
 
 
-def check_settings(owner: str, settings: dict[str, Any]) -> dict[str, Any]:
-    """The settings merged over the defaults and checked: ValueError, one line, naming the
-    setting and what is wrong."""
-    unknown = sorted(set(settings) - set(_DEFAULTS))
-    if unknown:
-        raise ValueError(f"{owner}: unknown setting(s) {unknown}; known: {sorted(_DEFAULTS)}")
-    s = {**_DEFAULTS, **settings}
-    if s["play_model"] == "shaping" and "nhc_sigma" not in settings:
-        s["nhc_sigma"] = NHC_SIGMA_SHAPING
-    for k, v in s.items():
-        if k in _BOOLS:
-            if not isinstance(v, (bool, np.bool_)):
-                raise ValueError(f"{owner}: {k} must be true or false, not {v!r}")
-            s[k] = bool(v)
-        elif k in _CHOICES:
-            if v not in _CHOICES[k]:
-                raise ValueError(f"{owner}: {k} must be one of {', '.join(_CHOICES[k])}, not {v!r}")
-        else:
-            if isinstance(v, str) and v.strip().lower() in ("inf", "infinity") and \
-                    (k == "zupt_interval" or k.endswith("correlation_time")):
-                v = math.inf
-            if isinstance(v, bool) or not isinstance(v, (int, float, np.floating, np.integer)) or math.isnan(v):
-                raise ValueError(f"{owner}: {k} must be a number, not {v!r}")
-            v = float(v)
-            if not math.isfinite(v) and not (k == "zupt_interval" or k.endswith("correlation_time")):
-                raise ValueError(f"{owner}: {k} must be finite, not {v!r}")
-            if k in _POSITIVE and not v > 0:
-                raise ValueError(f"{owner}: {k} must be > 0, not {v!r}")
-            if (k in _NONNEGATIVE or k == "zupt_interval" or k in _GRADE_NAMES) and v < 0:
-                raise ValueError(f"{owner}: {k} must be >= 0, not {v!r}")
-            s[k] = v
-    ImuGrade(**{k: s[k] for k in _GRADE_NAMES})  # the grade's own checks
-    return s
+@dataclass(frozen=True)
+class SmootherCore(InitialState):
+    """The smoother's own settings beside the initial state: the initial velocity error, P0 and
+    the filter's set-up."""
+
+    velocity_error_north: float = setting(0.0, "m/s", "initial velocity error, north (added to vn)")
+    velocity_error_east: float = setting(0.0, "m/s", "initial velocity error, east")
+    velocity_error_down: float = setting(0.0, "m/s", "initial velocity error, down")
+    tilt_sigma: float = setting(0.006 * DEG, "rad", "P0 std of phi_N, phi_E (paper: 0.006 deg)", ge=0)
+    heading_sigma: float = setting(0.06 * DEG, "rad", "P0 std of phi_D (paper: 0.06 deg)", ge=0)
+    velocity_sigma: float = setting(1e-4, "m/s", "P0 std of dv per axis", ge=0)
+    position_sigma: float = setting(0.1, "m", "P0 std of dr per axis", ge=0)
+    error_model: str = setting("paper12", "", "the INS error model: 'paper12' or 'full15' (ins_error_model)",
+                               choices=("paper12", "full15"))
+    filter_period: float = setting(0.05, "s", "Kalman filter epoch (a whole number of IMU steps)", gt=0)
+    feedback: bool = setting(True, "", "closed-loop error feedback into the INS")
+    memory_budget_mb: float = setting(320.0, "MB", "RAM for the record before it spills to disk", gt=0)
+
+
+@dataclass(frozen=True)
+class ImuGradeSettings(Settings):
+    """The filter's IMU noise model in the ``ImuErrors`` parameter names and datasheet units
+    (default: the navigation grade of Jiang et al. (2017), §3); :meth:`grade` gives the
+    :class:`ImuGrade`, which turns them into SI."""
+
+    gyro_arw_deg_sqrt_h: float = setting(_GRADE.gyro_arw_deg_sqrt_h, "deg/sqrt(h)", "gyro angle random walk",
+                                         ge=0)
+    gyro_bias_instability_deg_h: float = setting(_GRADE.gyro_bias_instability_deg_h, "deg/h",
+                                                 "gyro bias instability (Gauss-Markov sigma 1.076 x this)", ge=0)
+    gyro_bias_correlation_time: float = setting(_GRADE.gyro_bias_correlation_time, "s", "gyro bias correlation "
+                                                "time (inf: a random constant)", gt=0, convert=number_or_inf)
+    accel_noise_ug_sqrt_hz: float = setting(_GRADE.accel_noise_ug_sqrt_hz, "µg/sqrt(Hz)",
+                                            "accelerometer noise density", ge=0)
+    accel_bias_instability_ug: float = setting(_GRADE.accel_bias_instability_ug, "µg",
+                                               "accelerometer bias instability", ge=0)
+    accel_bias_correlation_time: float = setting(_GRADE.accel_bias_correlation_time, "s", "accelerometer bias "
+                                                 "correlation time (inf: a random constant)", gt=0,
+                                                 convert=number_or_inf)
+    gyro_turn_on_bias_sigma_deg_h: float = setting(_GRADE.gyro_turn_on_bias_sigma_deg_h, "deg/h",
+                                                   "sigma of the turn-on gyro bias (constant per run)", ge=0)
+    accel_turn_on_bias_sigma_ug: float = setting(_GRADE.accel_turn_on_bias_sigma_ug, "µg",
+                                                 "sigma of the turn-on accelerometer bias", ge=0)
+
+    def grade(self) -> ImuGrade:
+        return ImuGrade(**{k: getattr(self, k) for k in _GRADE_NAMES})
+
+
+# the aidings' blocks after the smoother's own (fields go in reverse MRO order)
+@dataclass(frozen=True)
+class AidedInsSettings(*reversed([cls.settings for cls in AIDINGS]), ImuGradeSettings, SmootherCore):
+    """:class:`AidedInsSmoother`'s (and :func:`covariance_analysis`'s) settings: the initial
+    state, :class:`SmootherCore`, :class:`ImuGradeSettings` and the settings of every aiding in
+    :data:`~railfmu.estimators.inertial.aiding.AIDINGS` (module docstring)."""
 
 
 class FilterModel:
@@ -311,10 +285,10 @@ class FilterModel:
     wheel-rail play's (:class:`~railfmu.estimators.inertial.rail_play.RailPlay`, four nuisance states, not fed
     back). Its matrices are the two blocks side by side; the play enters only the NHC rows."""
 
-    def __init__(self, s: dict[str, Any]) -> None:
-        self.nav = ErrorModel(s["error_model"], ImuGrade(**{k: s[k] for k in _GRADE_NAMES}))
-        self.play = RailPlay(s["play_sigma_lateral"], s["play_sigma_vertical"], s["play_wavelength"],
-                             s["play_damping"]) if s["play_model"] == "shaping" else None
+    def __init__(self, s: AidedInsSettings) -> None:
+        self.nav = ErrorModel(s.error_model, s.grade())
+        self.play = RailPlay(s.play_sigma_lateral, s.play_sigma_vertical, s.play_wavelength,
+                             s.play_damping) if s.play_model == "shaping" else None
         self.n_nav = self.nav.n
         self.names = self.nav.names + (self.play.names if self.play else ())
         self.n = len(self.names)
@@ -324,12 +298,12 @@ class FilterModel:
         out[..., :self.n_nav] = H
         return out
 
-    def initial_covariance(self, s: dict[str, Any]) -> np.ndarray:
+    def initial_covariance(self, s: AidedInsSettings) -> np.ndarray:
         """P0: the error model's from the settings' sigmas, the play's stationary covariance."""
         m = self.n_nav
         P = np.zeros((self.n, self.n))
-        P[:m, :m] = self.nav.initial_covariance(s["tilt_sigma"], s["heading_sigma"], s["velocity_sigma"],
-                                                s["position_sigma"])
+        P[:m, :m] = self.nav.initial_covariance(s.tilt_sigma, s.heading_sigma, s.velocity_sigma,
+                                                s.position_sigma)
         if self.play:
             P[self.n_nav:, self.n_nav:] = self.play.stationary_covariance()
         return P
@@ -629,11 +603,11 @@ class AidedInsSmoother(OfflineObserver, SmootherRecord):
 
     def __init__(self, dt: float, **settings: Any) -> None:
         super().__init__(dt, **settings)
-        self.s = s = check_settings("AidedInsSmoother", settings)
-        steps = s["filter_period"] / self.dt
+        self.config = s = AidedInsSettings.from_mapping(settings, "AidedInsSmoother")
+        steps = s.filter_period / self.dt
         self.epoch_steps = max(1, round(steps))
         if abs(steps - self.epoch_steps) > 1e-6 * steps:
-            raise ValueError(f"AidedInsSmoother: filter_period {s['filter_period']!r} s is not a whole number of "
+            raise ValueError(f"AidedInsSmoother: filter_period {s.filter_period!r} s is not a whole number of "
                              f"IMU steps ({self.dt!r} s)")
         self.states = FilterModel(s)
         self.model = self.states.nav
@@ -648,7 +622,7 @@ class AidedInsSmoother(OfflineObserver, SmootherRecord):
         """Which epochs get a ZUPT (module docstring), from the stopped flag per sample."""
         at = stopped[idx]
         use = np.zeros(idx.size, dtype=bool)
-        interval = self.s["zupt_interval"]
+        interval = self.config.zupt_interval
         if interval == 0:
             return at
         k = 0
@@ -673,21 +647,21 @@ class AidedInsSmoother(OfflineObserver, SmootherRecord):
 
     def _stopped(self, t: np.ndarray, Z: np.ndarray, U: np.ndarray, mask: np.ndarray) -> np.ndarray:
         flag = mask[:, 0] & (np.nan_to_num(Z[:, 0]) >= 0.5)
-        if self.s["zupt_source"] == "flag":
+        if self.config.zupt_source == "flag":
             return flag
         from railfmu.estimators.inertial.zupt_detector import (
             detect_stationary,
             detector_scores,
             noise_sigmas,
         )
-        sigmas = noise_sigmas({k: v for k, v in self.s.items() if k in _GRADE_NAMES}, self.dt)
+        sigmas = noise_sigmas({k: getattr(self.config, k) for k in _GRADE_NAMES}, self.dt)
         detected = np.asarray(detect_stationary(U, self.dt, **({"sigma_a": sigmas[0], "sigma_g": sigmas[1]}
                                                               if min(sigmas) > 0 else {})), dtype=bool)
         self.detector = dict(detector_scores(detected, flag))
         return detected
 
     def _run(self, t: np.ndarray, Z: np.ndarray, U: np.ndarray, mask: np.ndarray) -> np.ndarray:
-        s, model, dt = self.s, self.states, self.dt
+        s, model, dt = self.config, self.states, self.dt
         n_samples = t.shape[0]
         if n_samples > 1:
             steps = np.diff(t) / dt
@@ -706,12 +680,12 @@ class AidedInsSmoother(OfflineObserver, SmootherRecord):
         N, n = idx.size, model.n
         self.epoch_times = t[idx]
         stopped = self._stopped(t, Z, U, mask)
-        zupt = self._zupt_epochs(stopped, idx, self.epoch_times) if s["zupt"] else np.zeros(N, dtype=bool)
+        zupt = self._zupt_epochs(stopped, idx, self.epoch_times) if s.zupt else np.zeros(N, dtype=bool)
 
         shapes = {"Pm": (N, n, n), "Pp": (N, n, n), "Phi": (max(N - 1, 0), n, n), "Q": (max(N - 1, 0), n, n),
                   "C": (max(N - 1, 0), n, n), "Ps": (N, n, n), "a": (N, n), "d": (N, n), "s": (N, n),
                   "c": (N, n), "nav": (n_samples, 9), "nominal": (N, 17)}
-        store = _Store(shapes, s["memory_budget_mb"] * 1e6)
+        store = _Store(shapes, s.memory_budget_mb * 1e6)
         self._init_record(store, model.names)
         self.spilled = store.spilled
         self.zupt_epochs = zupt
@@ -727,12 +701,12 @@ class AidedInsSmoother(OfflineObserver, SmootherRecord):
         return out
 
     def _initial_ins(self, u0: np.ndarray) -> Strapdown:
-        s = self.s
-        C = perturb(dcm_from_rph(s["roll"], s["pitch"], s["heading"]),
-                    [s["tilt_error_north"], s["tilt_error_east"], s["heading_error"]])
-        v = (s["vn"] + s["velocity_error_north"], s["ve"] + s["velocity_error_east"],
-             s["vd"] + s["velocity_error_down"])
-        ins = Strapdown.from_rph(s["latitude"], s["longitude"], s["height"], v, rph_from_dcm(C), self.dt)
+        s = self.config
+        C = perturb(dcm_from_rph(s.roll, s.pitch, s.heading),
+                    [s.tilt_error_north, s.tilt_error_east, s.heading_error])
+        v = (s.vn + s.velocity_error_north, s.ve + s.velocity_error_east,
+             s.vd + s.velocity_error_down)
+        ins = Strapdown.from_rph(s.latitude, s.longitude, s.height, v, rph_from_dcm(C), self.dt)
         ins.prime(u0[:3], u0[3:])
         return ins
 
@@ -744,7 +718,7 @@ class AidedInsSmoother(OfflineObserver, SmootherRecord):
         the updates of the aidings that measure loop over its epochs, and the navigation part of
         the estimate is fed back at the block's end (open loop within one block: 1 s at the
         default epoch, where the linearisation error is ~|dx|^2, < 1e-9 of the error)."""
-        s, model, dt = self.s, self.states, self.dt
+        s, model, dt = self.config, self.states, self.dt
         n, N = model.n, idx.size
         Pm, Pp, Phi_s, Q_s, a_s, d_s, c_s, nav = (store[k] for k in ("Pm", "Pp", "Phi", "Q", "a", "d", "c", "nav"))
         ins = self._initial_ins(U[0])
@@ -754,7 +728,7 @@ class AidedInsSmoother(OfflineObserver, SmootherRecord):
         nav[0] = ins.navigation()
         x = np.zeros(n)  # the filter's estimate relative to the fed-back INS
         P = model.initial_covariance(s)
-        feedback = s["feedback"]
+        feedback = s.feedback
         zero = np.zeros(n)
         k0 = -1  # the last epoch done
         while k0 < N - 1:
@@ -917,7 +891,7 @@ def covariance_analysis(times, f_n, C_bn, latitude, velocity, zupt, position=Non
     The paper's straight track (§5): ``f_n = (0, 0, -g)`` while cruising, ``C_bn`` the constant
     heading N45E, ``velocity`` 1 m/s along it, ZUPT (and optionally position) updates at both
     ends of the 30 m."""
-    s = check_settings("covariance_analysis", settings)
+    s = AidedInsSettings.from_mapping(settings, "covariance_analysis")
     times = np.asarray(times, dtype=float)
     N = times.shape[0]
     if times.ndim != 1 or N < 1 or np.any(np.diff(times) <= 0):
@@ -934,11 +908,11 @@ def covariance_analysis(times, f_n, C_bn, latitude, velocity, zupt, position=Non
     n = model.n
     shapes = {"Pm": (N, n, n), "Pp": (N, n, n), "Phi": (max(N - 1, 0), n, n), "Q": (max(N - 1, 0), n, n),
               "C": (max(N - 1, 0), n, n), "Ps": (N, n, n), "a": (N, n), "d": (N, n), "s": (N, n)}
-    store = _Store(shapes, s["memory_budget_mb"] * 1e6)
+    store = _Store(shapes, s.memory_budget_mb * 1e6)
     P = model.initial_covariance(s)
     # the filter's aidings without data: only their (H, R) at the given epochs
-    aidings = [Zupt(zupt, s["zupt_sigma"], model), Nhc(nhc, s["nhc_sigma"]), Odometer(odo, s["odometer_sigma"]),
-               Landmark(pos, s["landmark_sigma"], model)]
+    aidings = [Zupt(zupt, s.zupt_sigma, model), Nhc(nhc, s.nhc_sigma), Odometer(odo, s.odometer_sigma),
+               Landmark(pos, s.landmark_sigma, model)]
     for a in range(1, N, 512):  # Phi, Q of the epochs in blocks (bounded temporaries)
         b = min(a + 512, N)
         A = model.nav.system_matrices(lat[a:b], hgt[a:b], vel[a:b], f_n[a:b], C_bn[a:b])

@@ -13,6 +13,9 @@ The error state ``dx`` is the filter's (``PHI, DV, DR`` first, then biases and p
 
 Interface of an aiding:
 
+* ``settings``: its frozen :class:`~railfmu.estimators.core.settings.Settings` dataclass (the
+  switch and the noise, SSD keys of their own); the smoother's settings class is composed of
+  those of :data:`AIDINGS` (``AidedInsSettings``), so a new aiding brings its block with it;
 * ``name``: its count in ``AidedInsSmoother.finish()`` is ``f"{name}_updates"``;
   ``columns``, ``units``: its measurements of the record (``AidedInsSmoother.measurements``
   is their concatenation over :data:`AIDINGS`);
@@ -33,7 +36,62 @@ from typing import Any, ClassVar, NamedTuple
 
 import numpy as np
 
+from railfmu.estimators.core.settings import Settings, number_or_inf, setting
 from railfmu.estimators.inertial.ins_error_model import ned_difference
+from railfmu.estimators.inertial.rail_play import BUTTERWORTH
+
+#: the NHC's sigma when the play is modelled (``play_model="shaping"``): only the unmodelled rest
+NHC_SIGMA_SHAPING = 1e-4
+
+
+@dataclass(frozen=True)
+class ZuptSettings(Settings):
+    """Zero-velocity updates (:class:`Zupt`; the smoother picks the epochs)."""
+
+    zupt: bool = setting(True, "", "zero-velocity updates at the stopped epochs")
+    zupt_sigma: float = setting(1e-4, "m/s", "ZUPT noise std per axis", gt=0)
+    zupt_interval: float = setting(0.0, "s", "0: every stopped epoch; T: the first of a stop, then every T s; "
+                                   "inf: one per stop (the paper's)", ge=0, convert=number_or_inf)
+    zupt_source: str = setting("flag", "", "the stops: 'flag' (the stopped measurement) or 'detector' "
+                               "(detect_stationary on the increments)", choices=("flag", "detector"))
+
+
+@dataclass(frozen=True)
+class NhcSettings(Settings):
+    """Non-holonomic constraint (:class:`Nhc`) and the wheel-rail play in it
+    (:mod:`railfmu.estimators.inertial.rail_play`, with ``play_model="shaping"``)."""
+
+    nhc: bool = setting(False, "", "non-holonomic constraint (no sideways or vertical body velocity)")
+    nhc_sigma: float | None = setting(None, "m/s", f"NHC noise std; default 1e-3, with play_model='shaping' "
+                                      f"{NHC_SIGMA_SHAPING:g} (only what the play model leaves out)", gt=0)
+    play_model: str = setting("white", "", "the body's cross-track velocity: 'white' (noise of nhc_sigma) or "
+                              "'shaping' (four play states)", choices=("white", "shaping"))
+    play_sigma_lateral: float = setting(1e-3, "m", "stationary sigma of the lateral play (a sinusoid of "
+                                        "amplitude a: a / sqrt(2))", ge=0)
+    play_sigma_vertical: float = setting(5e-4, "m", "stationary sigma of the vertical play", ge=0)
+    play_wavelength: float = setting(2.0, "m", "the play's natural wavelength 2 pi / k", gt=0)
+    play_damping: float = setting(BUTTERWORTH, "", "the play oscillator's damping zeta (smaller: narrower "
+                                  "spectrum)", gt=0)
+
+    def __post_init__(self) -> None:
+        if self.nhc_sigma is None:  # its default depends on the play model
+            object.__setattr__(self, "nhc_sigma", NHC_SIGMA_SHAPING if self.play_model == "shaping" else 1e-3)
+
+
+@dataclass(frozen=True)
+class OdometerSettings(Settings):
+    """Odometer speed (:class:`Odometer`)."""
+
+    odometer: bool = setting(False, "", "odometer speed updates")
+    odometer_sigma: float = setting(1e-3, "m/s", "odometer speed noise std", gt=0)
+
+
+@dataclass(frozen=True)
+class LandmarkSettings(Settings):
+    """Landmark position fixes (:class:`Landmark`)."""
+
+    landmarks: bool = setting(False, "", "landmark position fixes")
+    landmark_sigma: float = setting(0.1, "m", "landmark fix noise std per axis", gt=0)
 
 
 class Measurement(NamedTuple):
@@ -46,12 +104,12 @@ class Measurement(NamedTuple):
 
 @dataclass
 class Record:
-    """What a run gives the aidings: the settings ``s`` (checked), the filter's ``model``
+    """What a run gives the aidings: the settings ``s`` (``AidedInsSettings``), the filter's ``model``
     (``FilterModel``), the measurements ``Z`` ``(n_samples, len(names))`` with their
     ``mask`` (present), their ``names``, the samples ``idx`` of the epochs and the epochs
     with a ZUPT (``zupt``, ``(N,)`` bool: the observer's choice, flag or detector)."""
 
-    s: dict[str, Any]
+    s: Any
     model: Any
     Z: np.ndarray
     mask: np.ndarray
@@ -110,6 +168,7 @@ class Aiding:
     measurement."""
 
     name: ClassVar[str]
+    settings: ClassVar[type[Settings]]
     columns: ClassVar[tuple[str, ...]] = ()
     units: ClassVar[dict[str, str]] = {}
     R: np.ndarray
@@ -143,6 +202,7 @@ class Zupt(Aiding):
     """
 
     name = "zupt"
+    settings = ZuptSettings
     columns = ("stopped",)
     units = {"stopped": ""}
 
@@ -153,7 +213,7 @@ class Zupt(Aiding):
 
     @classmethod
     def from_record(cls, rec: Record) -> Zupt | None:
-        return cls(rec.zupt, rec.s["zupt_sigma"], rec.model) if rec.s["zupt"] else None
+        return cls(rec.zupt, rec.s.zupt_sigma, rec.model) if rec.s.zupt else None
 
     def rows(self, j, k, block):
         return (self.H, self.R) if self.epochs[k] else None
@@ -172,6 +232,7 @@ class Nhc(Aiding):
     """
 
     name = "nhc"
+    settings = NhcSettings
 
     def __init__(self, epochs: np.ndarray, sigma: float) -> None:
         super().__init__(epochs)
@@ -179,7 +240,7 @@ class Nhc(Aiding):
 
     @classmethod
     def from_record(cls, rec: Record) -> Nhc | None:
-        return cls(rec.after_start_without_zupt(), rec.s["nhc_sigma"]) if rec.s["nhc"] else None
+        return cls(rec.after_start_without_zupt(), rec.s.nhc_sigma) if rec.s.nhc else None
 
     def rows(self, j, k, block):
         return (block.body_rows[j, 1:], self.R) if self.epochs[k] else None
@@ -199,6 +260,7 @@ class Odometer(Aiding):
     ``odometer_sigma``; the odometer's scale factor is not a state."""
 
     name = "odometer"
+    settings = OdometerSettings
     columns = ("odometer",)
     units = {"odometer": "m"}
 
@@ -210,12 +272,12 @@ class Odometer(Aiding):
 
     @classmethod
     def from_record(cls, rec: Record) -> Odometer | None:
-        if not rec.s["odometer"]:
+        if not rec.s.odometer:
             return None
         Z, mask = rec.columns(cls.columns)
         ok = np.zeros(rec.idx.size, dtype=bool)
         ok[1:] = mask[rec.idx[1:], 0] & mask[rec.idx[:-1], 0]  # a speed needs both ends
-        return cls(ok & rec.after_start_without_zupt(), rec.s["odometer_sigma"], Z[:, 0], rec.idx)
+        return cls(ok & rec.after_start_without_zupt(), rec.s.odometer_sigma, Z[:, 0], rec.idx)
 
     def prepare(self, block):
         if block.T is None or self.distance is None:
@@ -245,6 +307,7 @@ class Landmark(Aiding):
     last."""
 
     name = "landmark"
+    settings = LandmarkSettings
     columns = ("landmark_latitude", "landmark_longitude", "landmark_height")
     units = {"landmark_latitude": "rad", "landmark_longitude": "rad", "landmark_height": "m"}
 
@@ -257,7 +320,7 @@ class Landmark(Aiding):
 
     @classmethod
     def from_record(cls, rec: Record) -> Landmark | None:
-        if not rec.s["landmarks"]:
+        if not rec.s.landmarks:
             return None
         Z, mask = rec.columns(cls.columns)
         fix_at = np.full(rec.idx.size, -1)  # the sample of the fix an epoch uses
@@ -266,7 +329,7 @@ class Landmark(Aiding):
         new[1:] &= ~(present[:-1] & np.all(Z[1:] == Z[:-1], axis=1))  # a held fix is one fix
         for j in np.flatnonzero(new):
             fix_at[np.searchsorted(rec.idx, j, side="left")] = j  # the last fix of a chunk wins
-        return cls(fix_at >= 0, rec.s["landmark_sigma"], rec.model, fix_at, Z)
+        return cls(fix_at >= 0, rec.s.landmark_sigma, rec.model, fix_at, Z)
 
     def rows(self, j, k, block):
         return (self.H, self.R) if self.epochs[k] else None

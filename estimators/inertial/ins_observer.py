@@ -21,32 +21,20 @@ The observer's ``dt`` is the IMU interval. The first sample (time ``t0``) carrie
 input is missing (NaN), or a skipped sample time, is bridged by holding the last increment
 (a constant rate), so a gap costs accuracy, not the time base.
 
-Settings (all optional; SSD ``rf:Setting`` or keyword arguments):
-
-========================  =====  ===========================================================
-``latitude``              rad    initial latitude at ``t0`` (default 0)
-``longitude``             rad    initial longitude (default 0)
-``height``                m      initial height above the WGS-84 ellipsoid (default 0)
-``vn, ve, vd``            m/s    initial NED velocity (default 0)
-``roll, pitch, heading``  rad    initial true attitude (default 0)
-``tilt_error_north``      rad    initial attitude error: the computed attitude is the true one
-``tilt_error_east``       rad    rotated by the NED rotation vector (e_N, e_E, e_D)
-``heading_error``         rad    (``railfmu.estimators.inertial.attitude.perturb``; e_D adds to the heading).
-                                 Jiang et al. (2017): 0.006 deg tilt, 0.06 deg heading.
-``alignment``             --     ``"given"`` (default): the attitude above plus its errors;
-                                 ``"coarse"``: static coarse alignment from the first
-                                 ``alignment_time`` seconds (the body must be at rest then;
-                                 position held, velocity zero, the given attitude shown until
-                                 the first increment). Its heading error is
-                                 ``eps / (Omega cos L)`` (``railfmu.estimators.inertial.attitude``).
-``alignment_time``        s      length of the coarse alignment (default 60)
-========================  =====  ===========================================================
+Settings (all optional; SSD ``rf:Setting`` or keyword arguments): :class:`StrapdownSettings`,
+as ``self.config`` (units, defaults and checks there; ``StrapdownSettings.describe()`` lists
+them). Angles are in rad, as the SSDs bind them to the trolley's (rad) signals; Jiang et al.
+(2017)'s 0.006 deg tilt and 0.06 deg heading errors are ``1.047e-4`` and ``1.047e-3`` rad.
+With ``alignment="coarse"`` the position is held, the velocity zero and the given attitude
+shown until the first increment; its heading error is ``eps / (Omega cos L)``
+(``railfmu.estimators.inertial.attitude``).
 """
 
 from __future__ import annotations
 
 import csv
 import math
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, ClassVar
 
@@ -59,17 +47,42 @@ from railfmu.estimators.inertial.attitude import (
     rph_from_dcm,
 )
 from railfmu.estimators.core.observer import Observer
+from railfmu.estimators.core.settings import Settings, setting
 from railfmu.estimators.inertial.strapdown import NAV, Strapdown
 
 #: the known inputs (and the columns of ``imu.csv`` after ``time_s``)
 INCREMENTS = ("dtheta_x", "dtheta_y", "dtheta_z", "dv_x", "dv_y", "dv_z")
 
-_DEFAULTS: dict[str, Any] = {
-    "latitude": 0.0, "longitude": 0.0, "height": 0.0, "vn": 0.0, "ve": 0.0, "vd": 0.0,
-    "roll": 0.0, "pitch": 0.0, "heading": 0.0,
-    "tilt_error_north": 0.0, "tilt_error_east": 0.0, "heading_error": 0.0,
-    "alignment": "given", "alignment_time": 60.0,
-}
+
+
+@dataclass(frozen=True)
+class InitialState(Settings):
+    """The true navigation state at ``t0`` and the INS's initial attitude error (shared by
+    :class:`StrapdownINS` and the aided smoother). The error is a NED rotation vector
+    ``(e_N, e_E, e_D)``: the INS starts at ``perturb(C_true, e)`` (e_D adds to the heading)."""
+
+    latitude: float = setting(0.0, "rad", "initial latitude at t0", ge=-math.pi / 2, le=math.pi / 2)
+    longitude: float = setting(0.0, "rad", "initial longitude")
+    height: float = setting(0.0, "m", "initial height above the WGS-84 ellipsoid")
+    vn: float = setting(0.0, "m/s", "initial north velocity")
+    ve: float = setting(0.0, "m/s", "initial east velocity")
+    vd: float = setting(0.0, "m/s", "initial down velocity")
+    roll: float = setting(0.0, "rad", "initial true roll")
+    pitch: float = setting(0.0, "rad", "initial true pitch")
+    heading: float = setting(0.0, "rad", "initial true heading")
+    tilt_error_north: float = setting(0.0, "rad", "initial attitude error e_N (paper: 0.006 deg = 1.047e-4 rad)")
+    tilt_error_east: float = setting(0.0, "rad", "initial attitude error e_E")
+    heading_error: float = setting(0.0, "rad", "initial attitude error e_D (paper: 0.06 deg = 1.047e-3 rad)")
+
+
+@dataclass(frozen=True)
+class StrapdownSettings(InitialState):
+    """:class:`StrapdownINS`'s settings: the initial state and how the attitude is found."""
+
+    alignment: str = setting("given", "", "'given': the attitude above plus its errors; 'coarse': static "
+                             "coarse alignment from the first alignment_time s (body at rest)",
+                             choices=("given", "coarse"))
+    alignment_time: float = setting(60.0, "s", "length of the coarse alignment", gt=0)
 
 
 class StrapdownINS(Observer):
@@ -85,48 +98,38 @@ class StrapdownINS(Observer):
 
     def __init__(self, dt: float, **settings: Any) -> None:
         super().__init__(dt, **settings)
-        unknown = sorted(set(settings) - set(_DEFAULTS))
-        if unknown:
-            raise ValueError(f"StrapdownINS: unknown setting(s) {unknown}; known: {sorted(_DEFAULTS)}")
-        s = {**_DEFAULTS, **settings}
-        if s["alignment"] not in ("given", "coarse"):
-            raise ValueError(f"StrapdownINS: alignment must be 'given' or 'coarse', not {s['alignment']!r}")
-        for k, v in s.items():
-            if k != "alignment":
-                if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-                    raise ValueError(f"StrapdownINS: {k} must be a finite number, not {v!r}")
-                s[k] = float(v)
-        if s["alignment"] == "coarse" and s["alignment_time"] < self.dt:
-            raise ValueError(f"StrapdownINS: alignment_time {s['alignment_time']!r} s is shorter than one "
+        self.config = s = StrapdownSettings.from_mapping(settings, "StrapdownINS")
+        # a cross-check with dt, not a range: stays here
+        if s.alignment == "coarse" and s.alignment_time < self.dt:
+            raise ValueError(f"StrapdownINS: alignment_time {s.alignment_time!r} s is shorter than one "
                              f"IMU interval ({self.dt!r} s)")
-        self.s = s
         self.ins: Strapdown | None = None
 
     # -- initial state -------------------------------------------------------------------------
     def initial_attitude(self) -> np.ndarray:
         """C_b^n the INS starts from with ``alignment="given"``: the true attitude rotated by
         the configured errors."""
-        s = self.s
-        return perturb(dcm_from_rph(s["roll"], s["pitch"], s["heading"]),
-                       [s["tilt_error_north"], s["tilt_error_east"], s["heading_error"]])
+        s = self.config
+        return perturb(dcm_from_rph(s.roll, s.pitch, s.heading),
+                       [s.tilt_error_north, s.tilt_error_east, s.heading_error])
 
     def _start(self, C: np.ndarray, v_ned) -> Strapdown:
-        s = self.s
-        return Strapdown.from_rph(s["latitude"], s["longitude"], s["height"], v_ned, rph_from_dcm(C), self.dt)
+        s = self.config
+        return Strapdown.from_rph(s.latitude, s.longitude, s.height, v_ned, rph_from_dcm(C), self.dt)
 
     def _reset(self) -> None:
-        s = self.s
+        s = self.config
         self._pending = 0
         self._held: list[float] | None = None
-        self._aligning = s["alignment"] == "coarse"
+        self._aligning = s.alignment == "coarse"
         if self._aligning:
             self._sum = np.zeros(6)
             self._n_align = 0
-            self._n_align_target = max(1, round(s["alignment_time"] / self.dt))
-            self._rph = (s["roll"], s["pitch"], s["heading"])
+            self._n_align_target = max(1, round(s.alignment_time / self.dt))
+            self._rph = (s.roll, s.pitch, s.heading)
             self.ins = None
         else:
-            self.ins = self._start(self.initial_attitude(), (s["vn"], s["ve"], s["vd"]))
+            self.ins = self._start(self.initial_attitude(), (s.vn, s.ve, s.vd))
 
     # -- the observer hooks --------------------------------------------------------------------
     def _predict(self) -> None:
@@ -184,8 +187,8 @@ class StrapdownINS(Observer):
                 self._interval(self._held)
             self._pending = 0
         if self._aligning:
-            s = self.s
-            return np.array([s["latitude"], s["longitude"], s["height"], 0.0, 0.0, 0.0, *self._rph])
+            s = self.config
+            return np.array([s.latitude, s.longitude, s.height, 0.0, 0.0, 0.0, *self._rph])
         return np.array(self.ins.navigation())
 
     # -- offline on imu.csv --------------------------------------------------------------------
