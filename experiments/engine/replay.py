@@ -29,8 +29,10 @@ A replay's end is the normal end of its run (the runner reports no "early end" f
 from __future__ import annotations
 
 import csv
+import io
 import math
 import re
+import zipfile
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -96,14 +98,10 @@ def read_replay(component, file: str, units: dict) -> ReplayFile:
     path = Path(file)
     label = f"{component.name}.file {path}"
     try:
-        with open(path, newline="", encoding="utf-8-sig") as f:
-            first = f.readline()
-            second = f.readline()
-            f.seek(0)
-            if first.startswith("\ufeff"):
-                first = first[1:]
-            _separator(label, first, second)
-            rows = [r for r in csv.reader(f) if any(c.strip() for c in r)]
+        text = _text(path, component)
+        lines = text.splitlines()
+        _separator(label, lines[0] if lines else "", lines[1] if len(lines) > 1 else "")
+        rows = [r for r in csv.reader(io.StringIO(text, newline="")) if any(c.strip() for c in r)]
     except OSError as exc:
         raise UserError(f"{label}: cannot open ({exc.strerror})") from None
     except UnicodeDecodeError:
@@ -144,6 +142,21 @@ def read_replay(component, file: str, units: dict) -> ReplayFile:
             if unit is not None:
                 out.units[f"y_{k}"] = unit
     return out
+
+
+def _text(path: Path, component) -> str:
+    """The file's text; a relative path is the FMU's own ``resources/`` (an exported .ssp)."""
+    if not path.is_absolute() and not path.is_file():
+        fmu = Path(str(component.fmu))
+        if (fmu / "resources" / path).is_file():
+            path = fmu / "resources" / path
+        elif zipfile.is_zipfile(fmu):
+            with zipfile.ZipFile(fmu) as z:
+                try:
+                    return z.read(f"resources/{path.as_posix()}").decode("utf-8-sig")
+                except KeyError:
+                    pass
+    return path.read_text(encoding="utf-8-sig")
 
 
 def _separator(label: str, first: str, second: str) -> None:
