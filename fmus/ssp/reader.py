@@ -235,6 +235,7 @@ class _Reader:
         self.user = None
         for spec in observers:  # after the variant and --set: the parameters' final values
             self._setting_parameters(spec)
+        self._shared_agree()
         start, stop, step = self._time(*times, need=need_time)
         system = System(name=self.doc.get("name") or self.system.get("name"),
                         components=[Component(c.name, c.fmu, dict(c.params), model=c.md)
@@ -614,6 +615,19 @@ class _Reader:
             if el.get("value") is not None:
                 self._alias(el.get("name"), el.get("value"), f"{self.at(el)}: Parameter {el.get('name')!r}")
         return out
+
+    def _shared_agree(self) -> None:
+        """The targets of a system parameter that the SSD binds must hold one value (a track at
+        one speed, the vehicle and the filter at another would be a wrong run, not a variant)."""
+        for name, (targets, where) in self.aliases.items():
+            seen = []
+            for kind, owner, param in targets:
+                held = self.comps[owner].params if kind == "connector" else self.observers[owner].settings
+                if param in held and not isinstance(held[param], bool):
+                    seen.append((f"{owner}.{param}", held[param]))
+            if len({_show(v) if isinstance(v, (int, float)) else str(v) for _, v in seen}) > 1:
+                raise UserError(f"{where}: its targets disagree ({', '.join(f'{r} = {_show(v)}' for r, v in seen)}); "
+                                f"bind the value once, to {name}")
 
     def _comp_of(self, ref: str, where: str) -> _Comp:
         comp = self.comps.get(ref.partition(".")[0])
