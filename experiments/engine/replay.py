@@ -47,8 +47,8 @@ G = 9.80665
 #: unit factors a wrong file shows between its positions and the integral of its speeds
 FACTORS = ((1000.0, "positions look like km where m is expected (1000 times too small?)"),
            (1e-3, "positions look like mm or the speeds like km/s (1000 times too large?)"),
-           (3.6, "the speeds look like m/s where km/h is expected"),
-           (1 / 3.6, "the speeds look like km/h where m/s is expected"))
+           (3.6, "the speeds look like km/h where m/s is expected"),
+           (1 / 3.6, "the speeds look like m/s where km/h is expected"))
 
 
 @dataclass
