@@ -570,9 +570,8 @@ class _Reader:
             spec.period = period
             spec.period_from = self.user or "the SSD"
             return True
-        if self.user is not None:
-            self._not_shared(name, value, where or name,
-                             f"--set {{}}={value}" if self.user == "--set" else "{} in the variant")
+        if self.user == "--set":  # a variant may build a filter for another speed on purpose (robustness)
+            self._not_shared(name, value, where or name, f"--set {{}}={value}")
         value = self._user_path(name, value, where or name)
         spec.settings[setting] = _setting(str(value)) if isinstance(value, str) else value
         spec.setting_signals.pop(setting, None)  # a value given on purpose wins
@@ -622,7 +621,9 @@ class _Reader:
         for name, (targets, where) in self.aliases.items():
             seen = []
             for kind, owner, param in targets:
-                held = self.comps[owner].params if kind == "connector" else self.observers[owner].settings
+                if kind != "connector":  # the models must agree; an observer may be mistuned by a variant
+                    continue
+                held = self.comps[owner].params
                 if param in held and not isinstance(held[param], bool):
                     seen.append((f"{owner}.{param}", held[param]))
             if len({_show(v) if isinstance(v, (int, float)) else str(v) for _, v in seen}) > 1:
@@ -673,8 +674,9 @@ class _Reader:
             for name, value in values.items():
                 where = f"--set {cname}.{name}"
                 var = self._settable(comp, name, where)
+                typed = from_cli(value, var, where)  # a bad value is named first, as before
                 self._not_shared(f"{cname}.{name}", value, where, f"--set {{}}={value}")
-                comp.params[name] = self._resource(var, from_cli(value, var, where), where, f"{cname}.{name}")
+                comp.params[name] = self._resource(var, typed, where, f"{cname}.{name}")
 
     # -- time ---------------------------------------------------------------------------------
     def _time(self, start, stop, step, need: bool):
