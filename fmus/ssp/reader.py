@@ -570,8 +570,7 @@ class _Reader:
             spec.period = period
             spec.period_from = self.user or "the SSD"
             return True
-        if self.user == "--set":  # a variant may build a filter for another speed on purpose (robustness)
-            self._not_shared(name, value, where or name, f"--set {{}}={value}")
+        # an observer's copy of a system parameter may differ on purpose (a filter built for another speed)
         value = self._user_path(name, value, where or name)
         spec.settings[setting] = _setting(str(value)) if isinstance(value, str) else value
         spec.setting_signals.pop(setting, None)  # a value given on purpose wins
