@@ -118,7 +118,7 @@ def test_the_model_responds_at_the_harmonic_wave_frequency(fmu_dir):
     assert np.max(np.abs(r.signals["track.alignment_1"])) == pytest.approx(1e-3, rel=1e-3)
     assert dominant(r) == pytest.approx(1.0, abs=0.25)
     slow = railfmu.run("track_wheelset", "harmonic", stop_time=6.0,
-                       parameters={"track.V": 10.0, "wheelset.V": 10, "alignment.V": 10})
+                       parameters={"run.V": 10.0})  # the track's, vehicle's and filter's speed
     assert slow.metrics["parameters"]["wheelset"]["V"] == 10.0
     assert dominant(slow) == pytest.approx(0.5, abs=0.25)
 

@@ -131,7 +131,7 @@ def test_bad_ssp_is_one_line_and_exit_2(tmp_path, old, new, file, message):
     (["run", "track_wheelset", "--set", "bogie.m=1"], "bogie"),
     (["run", "track_wheelset", "--set", "wheelset.mass=1"], "mass"),
     (["run", "track_wheelset", "--set", "wheelset.m=-1"], "parameter m = -1 must be > 0"),
-    (["run", "track_wheelset", "--set", "track.profile_file=/nonexistent/p.csv"], "p.csv: cannot open"),
+    (["run", "track_wheelset", "--set", "track.profile_file=/nonexistent/p.csv"], "p.csv: no such file"),
     (["run", "track_wheelset", "--stop-time", "1", "--step-size", "0.3"], "does not divide"),
     (["run", "track_wheelset", "--stop-time", "0"], "--stop-time 0: must be a positive"),
     (["run", "track_wheelset", "--step-size", "nan"], "--step-size nan: must be a positive"),

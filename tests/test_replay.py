@@ -69,9 +69,9 @@ def test_replayed_run_gives_the_simulated_estimates_bit_for_bit(simulated, tmp_p
     assert rep["time"] == orig["time"] and len(rep["time"]) == 2001
     for channel, column in CHANNELS.items():
         assert rep[channel] == orig[COLUMNS[column]], channel
-    # the table's last row (2 s) ended the run, not the SSD's 600 s stop time
-    assert m["stop_time_s"] == 600.0 and m["end_time_s"] == 2.0
-    assert m["early_end"].startswith("SignalTable.fmu (replay) ended the simulation at t = 2 s")
+    # the table's last row (2 s) is the run's stop time (not the SSD's 600 s), and its normal end
+    assert m["stop_time_s"] == 2.0 and m["end_time_s"] == 2.0 and m["early_end"] is None
+    assert m["stop_time_from"] == "the last row of replay.file"
 
 
 def test_offline_smoother_is_the_filters_rts_smoother_on_the_table(simulated, tmp_path):
@@ -107,11 +107,11 @@ def test_cli_runs_the_shipped_table_from_any_folder(shipped_run):
     for channel, column in CHANNELS.items():
         assert signals[channel] == table[column], channel
     m = json.loads((out / "metrics.json").read_text())
-    assert m["variant"] == "measured" and m["end_time_s"] == 3.0 and m["early_end"]
+    assert m["variant"] == "measured" and m["end_time_s"] == 3.0 and m["early_end"] is None
     assert m["parameters"]["replay"]["file"] == str(TABLE)  # resources/... against the SSP root
     assert len(columns(out / "estimates.csv")["alignment.xi"]) == 3001
     assert 0 < m["observers"]["alignment"]["xi"]["rel_error"] < 0.5
-    assert "**Early end** at t = 3 s of 600 s" in (out / "report.md").read_text()
+    assert "Early end" not in (out / "report.md").read_text() and m["stop_time_s"] == 3.0
 
 
 def fmu_resources(ssp: Path, fmu: str) -> dict[str, bytes]:

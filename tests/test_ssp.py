@@ -197,13 +197,15 @@ def test_ssv_file_units_and_ssm_mapping(fmu_dir, tmp_path):
     assert p["V"] == pytest.approx(20.0, rel=1e-15) and p["seed"] == 9
 
 
-def test_overrides_convert_cli_values(fmu_dir, tmp_path):
+def test_overrides_convert_cli_values(fmu_dir, tmp_path, monkeypatch):
     write_ssd(tmp_path)
+    monkeypatch.chdir(tmp_path)  # a file a user names is relative to the current directory
+    (tmp_path / "p.csv").write_text("x\n")
     s = read_system(tmp_path, fmu_dirs=[fmu_dir], overrides={
         "track": {"psd_level": 2.0, "seed": "5", "profile_file": "p.csv", "V": "25"},
         "wheelset": {"y": 1e-3}})  # a state's start value (output, initial="exact")
     p = s.component("track").parameters
-    assert p == {"psd_level": 2, "seed": 5, "profile_file": "p.csv", "V": 25.0}
+    assert p == {"psd_level": 2, "seed": 5, "profile_file": str((tmp_path / "p.csv").resolve()), "V": 25.0}
     assert isinstance(p["psd_level"], int) and s.component("wheelset").parameters == {"y": 1e-3}
     for bad, words in [({"track": {"psd_level": 2.5}}, "--set track.psd_level: 2.5 is not a valid Integer"),
                        ({"track": {"V": "fast"}}, "--set track.V: 'fast' is not a valid Real"),

@@ -247,7 +247,7 @@ def test_replay_of_the_survey_files_gives_the_online_estimates(survey, tmp_path)
         assert np.abs(a - b).max() <= 1e-14 * max(1.0, np.abs(a).max()), k
     import json
     rm = json.loads((tmp_path / "replay" / "metrics.json").read_text())
-    assert rm["early_end"] and rm["end_time_s"] == FAST  # the table's end ended the run
+    assert rm["early_end"] is None and rm["end_time_s"] == FAST == rm["stop_time_s"]  # the table's end: a normal end
     assert rm["ins_position_error_max_mm"] == pytest.approx(m["ins_position_error_max_mm"], abs=2e-6)  # degrees
 
 

@@ -196,6 +196,13 @@ def report_md(exp: Experiment, system: System, metrics: dict, plots: list[str]) 
           f"(from {system.step_size_from}), "
           f"{metrics['master']} master, {metrics['wall_time_s']:.2f} s wall time "
           f"({metrics['realtime_factor']:.1f}x real time)."), ""]
+    if metrics["warnings"]:  # what looks wrong comes first, not at the end of the report
+        L += ["**Warnings**", "", *[f"- {w}" for w in metrics["warnings"]], ""]
+    derived = (metrics.get("replay") or {}).get("derived", [])
+    given = (metrics.get("replay") or {}).get("given") or metrics.get("files") or {}
+    if given or derived:
+        L += ["Files and what the data set:", "", *[f"- {k} = {v['path']} ({v['how']})" for k, v in given.items()],
+              *[f"- {n}" for n in derived], ""]
     if metrics["early_end"]:
         L += [f"**Early end** at t = {metrics['end_time_s']:g} s of {system.stop_time:g} s: "
               f"{metrics['early_end']}. Every row up to that time is recorded.", ""]
@@ -212,7 +219,7 @@ def report_md(exp: Experiment, system: System, metrics: dict, plots: list[str]) 
         L += ["", section]
     L += ["", "## Signals (rms)", "", "| signal | rms |", "|---|---|"]
     L += [f"| {k} | {v:.4g} |" for k, v in metrics["rms"].items()]
-    if metrics["warnings"] or metrics["notes"]:
-        L += ["", "## Notes", ""] + [f"- {w}" for w in metrics["warnings"] + metrics["notes"]]
+    if metrics["notes"]:
+        L += ["", "## Notes", ""] + [f"- {w}" for w in metrics["notes"]]
     L += ["", *[f"![{p}]({p})" for p in plots]]
     return "\n".join(L) + "\n"

@@ -95,6 +95,10 @@ def load_system(exp: Experiment, variant: str | None, sets: dict | None = None, 
         for c in seeded:
             c.parameters["seed"] = seed
     system.warnings[:0] = exp.warnings  # printed with the reader's, kept in metrics.json and the report
+    from railfmu.experiments.engine.replay import shape_replays
+
+    # a replay's file sets the stop time, step, time shift and observer periods (unless the user did)
+    system.replay = shape_replays(system, exp.study)
     return system
 
 
@@ -136,6 +140,10 @@ def execute(name: str | Path, variant: str | None = None, out: Path | str | None
     say(f"running {_what_runs(exp, system, variant)}: {system.stop_time - system.start_time:g} s{until} at "
         f"{system.step_size:g} s (from {system.step_size_from}), {master} master"
         + (f" -> {out}" if out is not None else ""))
+    for name, (path, how) in system.files.items():
+        say(f"  {name} = {path} ({how})")
+    for note in system.notes:
+        say(f"  {note}")
     if verbose:
         say(f"  study: {exp.study_name or '(plain SSP)'} ({type(exp.study).__name__}); SSD {exp.path}")
         for c in system.components:
@@ -165,7 +173,12 @@ def execute(name: str | Path, variant: str | None = None, out: Path | str | None
     observers = bank.estimators()
     t_est, est = bank.arrays()
     estimates = {"time": t_est, **{c: est[:, j] for j, c in enumerate(bank.columns)}, **bank.offline_estimates()}
-    if result.early_end:
+    early_end, notes = result.early_end, list(system.notes) + list(result.notes)
+    ends = [c for c, f in (getattr(system, "replay", None) or {}).get("files", {}).items() if f["ends_run"]]
+    if early_end and any(f"({c})" in early_end for c in ends):  # a replay's last row: its normal end
+        notes = [n for n in notes if n != early_end] + [f"the run ended at the replay's last row: {early_end}"]
+        early_end = None
+    if early_end:
         kept = f"; {out / 'signals.csv'} holds every row up to t = {result.end_time:g} s" if recorder else ""
         warn(f"railfmu: early end: {result.early_end}{kept}")
     simulated = result.end_time - system.start_time
@@ -173,7 +186,7 @@ def execute(name: str | Path, variant: str | None = None, out: Path | str | None
         "experiment": exp.name, "variant": variant, "master": master, "seed": seed,
         "start_time_s": system.start_time, "stop_time_s": system.stop_time, "step_size_s": system.step_size,
         "step_size_from": system.step_size_from, "stop_time_from": system.stop_time_from,
-        "end_time_s": result.end_time, "early_end": result.early_end,
+        "end_time_s": result.end_time, "early_end": early_end,
         "simulated_seconds": simulated,
         "wall_time_s": result.wall_time_s,
         "realtime_factor": simulated / result.wall_time_s,
@@ -183,11 +196,22 @@ def execute(name: str | Path, variant: str | None = None, out: Path | str | None
         "observers": bank.metrics(signals),
         "roles": roles,  # what the study read where (study_protocol.Role)
         "warnings": system.warnings,
-        "notes": result.notes,
+        "notes": notes,
     }
+    if getattr(system, "replay", None):
+        metrics["replay"] = {**system.replay, "given": {k: {"path": p, "how": h} for k, (p, h) in system.files.items()},
+                             "derived": list(system.notes)}
+        _unscore(metrics["observers"], system, system.replay.get("unscored", []))
+    elif system.files:
+        metrics["files"] = {k: {"path": p, "how": h} for k, (p, h) in system.files.items()}
     t_study = time.perf_counter()
     data = RunData(signals, estimates, metrics, roles, observers)
     metrics.update(exp.study.metrics(data))
+    from railfmu.experiments.engine.replay import learned_nothing
+
+    for w in learned_nothing(metrics["observers"]):  # said in the heading's warnings, not only deep in the JSON
+        metrics["warnings"].append(w)
+        warn(f"railfmu: warning: {w}")
     # where a run's time goes (benchmarks/overhead.py): stepping includes the online observers
     metrics["timing_s"] = {"setup": setup_s, "stepping": result.wall_time_s,
                            "study_metrics": time.perf_counter() - t_study}
@@ -196,6 +220,17 @@ def execute(name: str | Path, variant: str | None = None, out: Path | str | None
         say(f"  timing: setup {setup_s:.2f} s, stepping {result.wall_time_s:.2f} s, study metrics "
             f"{metrics['timing_s']['study_metrics']:.2f} s")
     return Run(exp, system, variant, master, result.columns, result.data, bank, data, arrays, streamed=out)
+
+
+def _unscore(observers: dict, system, unscored: list[str]) -> None:
+    """Null every score against a truth signal of a replay too short for one."""
+    for spec in system.observers:
+        m = observers.get(spec.name)
+        if m is None:
+            continue
+        for est, sig in spec.truth.items():
+            if sig.partition(".")[0] in unscored and isinstance(m.get(est), dict):
+                m[est] = {k: None for k in m[est]} | {"unscored": f"{sig.partition('.')[0]}.file is too short"}
 
 
 def _python_warning(line: str) -> None:

@@ -79,6 +79,37 @@ def _run_member(name: str, variant: str, out: str | None, master: str | None, ov
                           write_files=out is not None, series=series, **overrides)
 
 
+def _user_files(sets: dict) -> dict[str, str]:
+    """Make every file a ``--set`` names (``X.file``, ``X.*_file``) absolute against the current
+    directory before the tasks leave (a worker's directory is not the user's); ``resources/...``
+    stays the SSP's. Returns ``{name: absolute path}``; a missing file is a one-line error."""
+    out = {}
+    for comp, params in sets.items():
+        for param, value in list(params.items()):
+            if not (param == "file" or param.endswith("_file")) or not isinstance(value, str) or not value \
+                    or value.startswith("resources/"):
+                continue
+            path = Path(value).expanduser()
+            path = path if path.is_absolute() else Path.cwd() / path
+            if not path.is_file():
+                raise UserError(f"--set {comp}.{param}: {value}: no such file ({path})")
+            params[param] = out[f"{comp}.{param}"] = str(path.resolve())
+    return out
+
+
+def _workers_see(client, scheduler: str, files: dict[str, str]) -> None:
+    """A remote scheduler's workers read the files where the user named them: each must see
+    the path (a shared file system); a one-line error names the first that does not."""
+    import os
+
+    for name, path in files.items():
+        seen = client.run(os.path.isfile, path)
+        blind = [w for w, ok in seen.items() if not ok]
+        if blind:
+            raise UserError(f"--scheduler {scheduler}: worker {blind[0]} cannot see {name}={path}; the workers must "
+                            "see the files a study names at the same path (a shared file system)")
+
+
 def _eta(elapsed: float, done: int, total: int) -> str:
     left = elapsed / done * (total - done)
     return f"~{left:.0f} s left" if done < total else "done"
@@ -107,6 +138,7 @@ def run_study(name: str, out: Path | str | None = None, scheduler: str | None = 
     monte_carlo = runs > 1
     first = seed if seed is not None else DEFAULT_FIRST_SEED
     seeds = [first + i for i in range(runs)] if monte_carlo else [seed]
+    files = _user_files(overrides.get("sets") or {})  # relative to this folder, not the workers'
     out = Path(out or Path("out") / f"{exp.name}_study")
     out.mkdir(parents=True, exist_ok=True)
     build_all(default_out())  # once, before workers would race to build the same FMUs
@@ -126,6 +158,7 @@ def run_study(name: str, out: Path | str | None = None, scheduler: str | None = 
                 client = Client(scheduler, timeout="10s")
             except (OSError, TimeoutError) as exc:
                 raise UserError(f"--scheduler {scheduler}: cannot connect ({exc})") from None
+            _workers_see(client, scheduler, files)
         else:
             cluster = LocalCluster(n_workers=workers or min(total, 2), threads_per_worker=1, processes=True,
                                    dashboard_address=None, silence_logs=40)

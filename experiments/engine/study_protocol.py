@@ -130,6 +130,10 @@ class Study:
     figures_of_signals: dict | None = None
     #: x-axis of those figures: "time" or a role / signal giving the distance along the track
     x_axis: str = "time"
+    #: the study's plausibility checks of each replay's file (``railfmu.experiments.engine.replay``):
+    #: ``check(replay_file, system) -> [warning, ...]``, raising a UserError for a file that is wrong;
+    #: run after the engine's own (separator, times, positions against speeds)
+    replay_checks: tuple = ()
     #: flattened metric names (fnmatch patterns) that the Monte Carlo table.md shows
     summary_metrics: tuple[str, ...] = ("observers.*.rms_error", "wall_time_s")
 
@@ -180,7 +184,7 @@ class Study:
         rows = []
         for variant, m in table.items():
             for obs, est, e in _raw_errors(m):
-                rows.append(f"| {variant} | {obs}.{est} | {e['rms_error']:.4g} | {e['rms_truth']:.4g} | "
+                rows.append(f"| {variant} | {obs}.{est} | {_num(e['rms_error'], '.4g')} | {_num(e['rms_truth'], '.4g')} | "
                             f"{_num(e['rel_error'], '.3f')} | {m['wall_time_s']:.2f} |")
             if not any(True for _ in _raw_errors(m)):
                 rows.append(f"| {variant} | - | - | - | - | {m['wall_time_s']:.2f} |")
@@ -219,7 +223,7 @@ def observers_md(metrics: dict) -> str:
     """Each observer's raw error against its truth signals, as a table that says it is raw."""
     L = []
     for name, m in metrics.get("observers", {}).items():
-        rows = [f"| {est} | {e['rms_error']:.4g} | {e['rms_truth']:.4g} | {_num(e['rel_error'], '.3f')} |"
+        rows = [f"| {est} | {_num(e['rms_error'], '.4g')} | {_num(e['rms_truth'], '.4g')} | {_num(e['rel_error'], '.3f')} |"
                 for obs, est, e in _raw_errors({"observers": {name: m}})]
         if rows:
             kind = (f"Offline observer `{name}` (run on the whole record after the run, "

@@ -113,6 +113,7 @@ class ObserverSpec:
     event: bool | None = None
     offline: bool = False
     units: dict[str, object] = field(default_factory=dict)
+    period_from: str = "ssd"  # where ``period`` came from: "ssd", or the variant / --set that set it
 
     @property
     def enabled(self) -> bool:
@@ -148,6 +149,12 @@ class System:
     master: str | None = None  # the master the experiment prefers (rf:FixedStep master=); None: the caller's
     stop_time_from: str = "given"  # where the stop time came from (--stop-time, the variant, the SSD)
     study: str | None = None  # the study it names (org.railfmu.study annotation); None: plain SSP
+    #: file parameters a user gave (variant, --set, parameters=): name -> (absolute path, how it was resolved)
+    files: dict[str, tuple[str, str]] = field(default_factory=dict, compare=False)
+    #: what the run engine derived from the data (a replay's stop time, step, time shift), for the heading
+    notes: list[str] = field(default_factory=list, compare=False)
+    #: system parameters (org.railfmu.parameters): name -> [target "component.param" / "observer.setting"]
+    shared: dict[str, list[str]] = field(default_factory=dict, compare=False)  # not written by write_ssp
 
     def component(self, name: str) -> Component:
         for c in self.components:

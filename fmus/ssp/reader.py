@@ -207,6 +207,8 @@ class _Reader:
         self._mds: dict[Path, object] = {}
         self.aliases: dict[str, tuple[list[tuple[str, str, str]], str]] = {}
         self.stop_time: tuple[float, str] | None = None  # (s, where) from experiment.stopTime
+        self.user: str | None = None  # while reading a variant or --set: its label (paths are the user's)
+        self.files: dict[str, tuple[str, str]] = {}  # user file parameters: name -> (absolute, how)
 
     def at(self, el) -> str:
         return f"{self.file}:{el.sourceline}"
@@ -226,10 +228,14 @@ class _Reader:
         self.observers = {o.name: o for o in observers}
         self._aliases()
         if variant is not None:
+            self.user = f"variant {Path(variant).stem}"
             self._variant(variant)
+        self.user = "--set"
         self._overrides(overrides)
+        self.user = None
         for spec in observers:  # after the variant and --set: the parameters' final values
             self._setting_parameters(spec)
+        self._shared_agree()
         start, stop, step = self._time(*times, need=need_time)
         system = System(name=self.doc.get("name") or self.system.get("name"),
                         components=[Component(c.name, c.fmu, dict(c.params), model=c.md)
@@ -238,7 +244,9 @@ class _Reader:
                         record=record, observers=observers,
                         description=self.doc.get("description") or self.system.get("description") or "",
                         warnings=self._unconnected(connections), step_size_from=self.step_from,
-                        master=self._master(), stop_time_from=self.stop_from, study=_study(self.system))
+                        master=self._master(), stop_time_from=self.stop_from, study=_study(self.system),
+                        files=dict(self.files),
+                        shared={n: [f"{o}.{p}" for _, o, p in t] for n, (t, _) in self.aliases.items()})
         try:  # what every master checks, so that `railfmu validate` reports what a run would refuse
             check_system(system)
         except UserError as exc:
@@ -460,17 +468,51 @@ class _Reader:
 
     def _set(self, comp: _Comp, v: ParamValue) -> None:
         var = self._settable(comp, v.name, v.where)
-        comp.params[var.name] = self._resource(var, from_ssv(v, var, comp.units), v.where)
+        if self.user is not None:  # a variant: the SSD's own bindings may set a shared parameter's targets
+            self._not_shared(f"{comp.name}.{var.name}", v.value, v.where, "a <ssv:Parameter name=\"{}\"> in the variant")
+        comp.params[var.name] = self._resource(var, from_ssv(v, var, comp.units), v.where, f"{comp.name}.{var.name}")
 
-    def _resource(self, var, value, where: str):
+    def _not_shared(self, ref: str, value, where: str, how: str) -> None:
+        """A component parameter or observer setting that is a target of a system parameter
+        (``org.railfmu.parameters``, e.g. the run's speed ``run.V``) is set through that name
+        only: one copy set on its own would contradict the others (the track at 30 m/s, the
+        vehicle and the filter at 20). A one-line error naming the system parameter."""
+        for name, (targets, _) in self.aliases.items():
+            refs = [f"{o}.{p}" for _, o, p in targets]
+            if ref in refs and len(refs) > 1:
+                raise UserError(f"{where}: {ref} is one of the targets of the system parameter {name} "
+                                f"({', '.join(refs)}), which must agree; set {how.format(name)} instead")
+
+    def _user_path(self, name: str, value, where: str):
+        """A file a user names (a variant, ``--set``, ``parameters=``) for a parameter or setting
+        called ``file`` or ``*_file``: a relative path means the current directory (not the FMU's
+        unpack folder, where an FMU would look); the FMU gets the absolute path. ``resources/...``
+        keeps meaning the SSP's files (:meth:`_resource`). Recorded in :attr:`files`."""
+        param = name.rpartition(".")[2]
+        if (self.user is None or not isinstance(value, str) or not value or value.startswith(RESOURCES)
+                or not (param == "file" or param.endswith("_file"))):
+            return value
+        path = Path(value).expanduser()
+        how = f"{self.user}: as given" if path.is_absolute() else f"{self.user}: {value} relative to {Path.cwd()}"
+        path = path if path.is_absolute() else Path.cwd() / path
+        if name in self.files and self.files[name][0] == str(path.resolve()):  # a second target of one name
+            return self.files[name][0]
+        if not path.is_file():
+            raise UserError(f"{where}: {value}: no such file ({path}{'' if Path(value).is_absolute() else ', relative to the current directory'})")
+        self.files[name] = (str(path.resolve()), how)
+        return str(path.resolve())
+
+    def _resource(self, var, value, where: str, name: str = ""):
         """A String parameter whose value is a relative path under ``resources/`` names a
         file of the SSP (a measured table, a track profile), as the SSD's FMU sources do: it
         is resolved against the SSP root, and the FMU gets the absolute path (an FMU resolves
         a relative one against its own ``resources/``, which the SSP's files are not in).
         ``write_ssp`` puts such a file into the FMU's own ``resources/``, where any importer
         lets the FMU find it."""
-        if var.type != "String" or not isinstance(value, str) or not value.startswith(RESOURCES):
+        if var.type != "String" or not isinstance(value, str):
             return value
+        if not value.startswith(RESOURCES):
+            return self._user_path(name or var.name, value, where)
         path = self.root.resolve(value, where)
         if not path.is_file():
             raise UserError(f"{where}: {value} not found in the SSP ({self.root.show(path)})")
@@ -526,7 +568,10 @@ class _Reader:
             if not (period > 0 and math.isfinite(period)):
                 raise UserError(f"{where or name}: samplePeriod {value!r} must be a positive number of seconds")
             spec.period = period
+            spec.period_from = self.user or "the SSD"
             return True
+        # an observer's copy of a system parameter may differ on purpose (a filter built for another speed)
+        value = self._user_path(name, value, where or name)
         spec.settings[setting] = _setting(str(value)) if isinstance(value, str) else value
         spec.setting_signals.pop(setting, None)  # a value given on purpose wins
         spec.setting_parameters.pop(setting, None)
@@ -569,6 +614,21 @@ class _Reader:
                 self._alias(el.get("name"), el.get("value"), f"{self.at(el)}: Parameter {el.get('name')!r}")
         return out
 
+    def _shared_agree(self) -> None:
+        """The targets of a system parameter that the SSD binds must hold one value (a track at
+        one speed, the vehicle and the filter at another would be a wrong run, not a variant)."""
+        for name, (targets, where) in self.aliases.items():
+            seen = []
+            for kind, owner, param in targets:
+                if kind != "connector":  # the models must agree; an observer may be mistuned by a variant
+                    continue
+                held = self.comps[owner].params
+                if param in held and not isinstance(held[param], bool):
+                    seen.append((f"{owner}.{param}", held[param]))
+            if len({_show(v) if isinstance(v, (int, float)) else str(v) for _, v in seen}) > 1:
+                raise UserError(f"{where}: its targets disagree ({', '.join(f'{r} = {_show(v)}' for r, v in seen)}); "
+                                f"bind the value once, to {name}")
+
     def _comp_of(self, ref: str, where: str) -> _Comp:
         comp = self.comps.get(ref.partition(".")[0])
         if comp is None:
@@ -584,8 +644,9 @@ class _Reader:
             if kind == "connector":
                 comp = self.comps[owner]
                 var = self._settable(comp, param, where)
-                comp.params[param] = self._resource(var, from_cli(value, var, where), where)
+                comp.params[param] = self._resource(var, from_cli(value, var, where), where, name)
             else:
+                value = self._user_path(name, value, where)
                 if isinstance(value, str) and value.startswith(RESOURCES):
                     path = self.root.resolve(value, where)
                     if not path.is_file():
@@ -612,7 +673,9 @@ class _Reader:
             for name, value in values.items():
                 where = f"--set {cname}.{name}"
                 var = self._settable(comp, name, where)
-                comp.params[name] = self._resource(var, from_cli(value, var, where), where)
+                typed = from_cli(value, var, where)  # a bad value is named first, as before
+                self._not_shared(f"{cname}.{name}", value, where, f"--set {{}}={value}")
+                comp.params[name] = self._resource(var, typed, where, f"{cname}.{name}")
 
     # -- time ---------------------------------------------------------------------------------
     def _time(self, start, stop, step, need: bool):
