@@ -34,8 +34,9 @@ import sympy as sp
 STEP_SIZE = sp.Symbol("h", real=True)
 #: A boundary (a sample or switching instant) that lies less than this fraction of ``h``
 #: after a communication point counts as reached there: masters compute their time as
-#: ``n h`` or accumulate ``t += h``, 2.2e-5 h apart after 1e6 steps, 1.8e-3 h after 1e7
-#: (measured at 1 ms and 0.1 ms). The runtime's ``STEP_TOLERANCE`` (model.h), the same value.
+#: ``n h`` or accumulate ``t += h``, apart by a fraction of ``h`` that grows as ``n^2`` and
+#: stays below this over millions of steps. The runtime's ``STEP_TOLERANCE`` (model.h), the
+#: same value.
 STEP_TOLERANCE = 1e-2
 
 
@@ -259,7 +260,7 @@ class Model:
             cache["linearized"] = {}
         pv = {**self.default_parameters(), **(p or {})}
         uv = {**{v.name: v.start for v in self.inputs}, **(u0 or {})}
-        # an estimator built per run (a Monte Carlo member) gets the same matrices without ~0.3 s of
+        # an estimator built per run (a Monte Carlo member) gets the same matrices without the cost of
         # substitution; evaluated by sympy as before, so the numbers are bit for bit the same
         key = (tuple(sorted(pv.items())), tuple(sorted(uv.items())))
         memo = cache["linearized"]

@@ -28,7 +28,7 @@ Process noise (Van Loan, IEEE TAC 23 (1978) 395) of ``dx = A x dt + dw``,
     expm([[-A, Q_c], [0, A^T]] dt) = [[., Phi^-1 Q_d], [0, Phi^T]],   Q_d = Phi (Phi^-1 Q_d)
     Q_d = int_0^dt e^{A s} Q_c e^{A^T s} ds
 
-Why not ``control.sample_system``: importing python-control costs ~2.7 s per process, its
+Why not ``control.sample_system``: importing python-control costs seconds per process, its
 ``foh`` is the triangle hold (above), and it has no noise discretisation.
 """
 

@@ -88,7 +88,7 @@ def update(x: np.ndarray, P: np.ndarray, z: np.ndarray, H: np.ndarray, R: np.nda
 
 def observability_matrix(F: np.ndarray, H: np.ndarray) -> np.ndarray:
     """``[H; H F; H F^2; ...; H F^(n-1)]`` of a discrete pair (F, H); (F, H) is observable when
-    its rank is n. python-control's ``obsv`` computes the same, but importing it costs ~2.7 s
+    its rank is n. python-control's ``obsv`` computes the same, but importing it costs seconds
     per process, which a Monte Carlo member should not pay for a 7x7 product."""
     n = F.shape[0]
     blocks = [np.asarray(H, dtype=float)]

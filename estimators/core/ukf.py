@@ -13,7 +13,7 @@ At ``n`` = 5, ``alpha`` = 1e-3, ``kappa`` = -2: ``n + lambda`` = 3e-6, ``W_i`` =
 of 1e6 times ``|Y|`` with both signs, so the mean carries ~1e6 ulp of ``|Y|``: at a position
 of 50 km with a 1 cm standard deviation it is 1e-5 m off (1e-3 sigma), and that error,
 times the nonlinearity, reaches the cross-covariances of ``P = sum Wc_i (Y_i - y)(Y_i - y)^T``
-(measured: 33 % off; ``tests/test_estimation_core.py``).
+(far off: ``tests/test_estimation_core.py``).
 
 Centre-referenced form (used here): with the deviations from the centre point
 ``D_i = Y_i - Y_0`` and ``delta = sum_{i>=1} W_i D_i``, exactly (``sum Wm = 1``)::
@@ -25,7 +25,7 @@ Centre-referenced form (used here): with the deviations from the centre point
 (expand ``sum Wc_i (D_i - delta)(D_i - delta)^T`` with ``sum Wc_i D_i = delta``,
 ``sum Wc_i = 2 + c_0``). The large weights now multiply only the deviations, of the size of
 the spread, never ``|Y|``: the result does not depend on where the state lies (the same to
-2e-8 at 50 km as at 0). For Merwe's points ``c_0 = beta - alpha^2`` (1.999999): ``P`` is a
+round-off at 50 km as at 0). For Merwe's points ``c_0 = beta - alpha^2`` (1.999999): ``P`` is a
 sum of positive semi-definite terms with positive weights, PSD by construction (the
 textbook sum is PSD only through the cancellation of its -1.7e6 term), and then
 symmetrised. For a linear map ``delta`` = 0 and ``P = F P F^T`` to round-off, whatever

@@ -27,8 +27,8 @@ the filter runs open loop about the INS: over 1 s the nominal moves from the cor
 (error rate) x 1 s, and the linearisation error is the square of that, ~1e-9 of the error
 itself. The covariance is unchanged by the reset (its Jacobian ``I - [phi/2 x]`` differs from
 I by < 1e-4). Without feedback (``feedback=False``) ``c_k = 0`` everywhere and this is the
-textbook open-loop filter around the free INS; the two agree to 0.2 mm over 40 s while the free
-INS drifts 0.6 m (``tests/test_aided_ins.py``).
+textbook open-loop filter around the free INS; the two agree to the linearisation error while
+the free INS drifts away (the bound is asserted in ``tests/test_aided_ins.py``).
 
 Backward pass (RTS, eq. 12) on the errors relative to the *fed-back* nominal ``n_k^+``: the
 INS carries ``n_k^+`` to ``n_{k+1}^-``, so ``Phi_k`` maps errors of ``n_k^+`` to errors of
@@ -62,7 +62,7 @@ independent ``w_k``: sampling it backwards gives draws with the exact joint cova
 as ``(I - C_k Phi_k) P+_k (I - C_k Phi_k)^T + C_k Q_k C_k^T`` (the same matrix, a sum of PSD
 terms). Only the epochs asked for are drawn, the chain's steps between them composed (their
 noise covariances summed through the ``C_k``), so the random numbers scale with the points
-wanted, not the epochs: 500 draws at 47 chord points of a 33 s run take 0.035 s.
+wanted, not the epochs.
 
 Measurements (the observer's ``measurements``; NaN or masked: absent). Each aiding is a
 measurement object of :mod:`railfmu.estimators.inertial.aiding` that gives its ``(z, H, R)``
@@ -101,14 +101,14 @@ only) stacks what the active ones give, in the order below, into one Joseph upda
   state absorbs). The play states are not navigation: they stay in the
   filter's state (not fed back), like the biases; the smoother, ``error_samples``,
   ``joint_covariance`` and :func:`covariance_analysis` carry them as any other state.
-  Measured on the 600 m survey with the trolley wobbling 1 mm / 0.5 mm at 2 m (navigation
-  grade, NHC + odometer, RMS over 8 runs of the max 30 m chord error, alignment / level): 1.56
-  / 1.44 mm with the white NHC at 3 mm/s, 0.75 / 0.44 mm with the shaping model at damping
-  1/sqrt(2), 0.38 / 0.20 mm at damping 0.1 (the wobble is one sinusoid: a narrowband model
-  fits it). The smoother's prediction of that statistic is conservative by 1.5-2 (0.60 / 0.39
-  mm at damping 0.1): the model's play keeps changing its amplitude and phase, the wobble's
-  does not. The smoothed lateral play follows the wobble to 0.11 mm rms
-  (``tests/test_aided_ins.py``).
+  With the trolley wobbling 1 mm / 0.5 mm at 2 m (navigation grade, NHC + odometer) the
+  shaping model's chord errors are well below the white NHC's, and smaller again at a low
+  damping such as 0.1 (the wobble is one sinusoid: a narrowband model fits it); the smoother's
+  prediction of the max chord error is conservative there: the model's play keeps changing its
+  amplitude and phase, the wobble's does not. Measured by ``railfmu study trolley_survey
+  --variant zupt_nhc_odometer`` (docs/studies/trolley_survey.md); that the shaping model beats
+  the white NHC and its lateral play follows the wobble is asserted in
+  ``tests/test_aided_ins.py``.
 * odometer (``odometer``, m, cumulative): speed form. ``z = x_b^T (r_k - r_{k-1}) / T -
   (s_k - s_{k-1}) / T``, the INS's mean body-x speed over the epoch (its own position
   increment, ``x_b`` at mid-epoch) minus the odometer's, with the body-x row of
@@ -135,18 +135,18 @@ long run's peak memory is the budget plus one block's temporaries (the smoother'
 the smoothed output are formed in blocks too), not the run; the results are bit for bit the
 same (``tests/test_aided_ins.py`` runs with a 0.01 MB budget).
 
-Consistency (``tests/test_aided_ins.py``): 8 seeds of the navigation grade on the trolley's
-150 s stop-and-go record, initial attitude errors drawn from P0: the smoothed position errors
-normalised by the smoothed sigmas have mean squares 1.21 (N), 0.82 (E), 0.69 (D), none
-beyond 3 sigma. With the non-holonomic constraint and the odometer use ``full15``: they observe
-the tilts directly (the body velocity through ``v x phi``), so the horizontal accelerometer
-biases can no longer hide in the tilts, and paper12, which lacks them, becomes overconfident in
-height (mean square 2.3, growing to 4.6 at 150 s) while full15 stays consistent (0.56, 0.55,
-0.64). The ideal IMU: smoothed position within 8e-4 mm of the truth over 150 s.
+Consistency (asserted in ``tests/test_aided_ins.py``): over IMU seeds of the navigation grade
+on the trolley's 150 s stop-and-go record, initial attitude errors drawn from P0, the smoothed
+position errors normalised by the smoothed sigmas have mean squares near 1 per axis. With the
+non-holonomic constraint and the odometer use ``full15``: they observe the tilts directly (the
+body velocity through ``v x phi``), so the horizontal accelerometer biases can no longer hide in
+the tilts, and paper12, which lacks them, becomes overconfident in height (its normalised mean
+square grows over the run) while full15 stays consistent. With the ideal IMU the smoothed
+position is at the truth to far below a millimetre.
 
-Cost: on a 33 s run at 200 Hz (661 epochs, ZUPT at the stops) the filter takes 0.05-0.15 s
-and the smoother 0.02-0.08 s on the shared 2-core machine (7-22 and 3-12 us per IMU sample),
-the numba strapdown 0.006 s.
+Cost: the wall times of a run are ``filter_seconds``, ``smoother_seconds`` and
+``strapdown_seconds`` (:meth:`~AidedInsSmoother.finish`; the study's ``filter_seconds``,
+``smoother_seconds``, docs/studies/trolley_survey.md).
 
 After :meth:`AidedInsSmoother.run`: ``epoch_times``, ``P_filter``, ``P_smoothed`` (``(N, n, n)``,
 ``state_names``), :meth:`~SmootherRecord.error_samples`, :meth:`~SmootherRecord.joint_covariance`,
@@ -551,7 +551,7 @@ def _quat_rotvec(x: float, y: float, z: float):
 
 def _dcm_rph(roll, pitch, heading) -> np.ndarray:
     """C_b^n = R_z(heading) R_y(pitch) R_x(roll) of arrays ``(M,)`` -> ``(M, 3, 3)`` (plain
-    numpy: scipy's Rotation costs ~1 ms per call to build, more than a block of the filter)."""
+    numpy: building scipy's Rotation costs more than a block of the filter)."""
     sr, cr, sp, cp, sh, ch = np.sin(roll), np.cos(roll), np.sin(pitch), np.cos(pitch), np.sin(heading), np.cos(heading)
     C = np.empty((np.shape(roll)[0], 3, 3))
     C[:, 0, 0], C[:, 0, 1], C[:, 0, 2] = cp * ch, -cr * sh + sr * sp * ch, sr * sh + cr * sp * ch

@@ -31,13 +31,13 @@ this is eqs. 21-22, ``Delta_y = e_E(s) - e_E(s + o) + (o / l) (e_E(b) - e_E(a))`
 smooth, so they are exact to ~1e-9 relative), the map a covariance goes through. It leaves
 out terms of second order in the errors (the chord turns by ``~|e_b - e_a| / l`` while
 points move along it by their along-track errors): for smooth errors whose chord errors
-are ~1 mm it is off by ~1e-4 of them (0.1 um), growing in proportion to the errors (1.4 %
-at 9 cm; measured in ``tests/test_chord_accuracy.py``). A constant error and a turn of the
+are ~1 mm it is off by ~1e-4 of them (0.1 um), growing in proportion to the errors (both
+asserted in ``tests/test_chord_accuracy.py``). A constant error and a turn of the
 whole survey about the vertical give no chord error, exactly.
 
 Prediction of the RMS of the max
 --------------------------------
-The issue's figure of merit (from the paper's "We take the maximum value of track
+The survey's figure of merit (from the paper's "We take the maximum value of track
 irregularity error", § 6.1) is, per run, the maximum ``|Delta|`` over all surveyed chord
 points, and over runs its RMS; the paper's Fig. 12 values themselves equal the largest
 pointwise sigma (below, Sensitivity). From ``S`` samples of the smoother's joint Gaussian of
@@ -47,14 +47,12 @@ the position errors at the grid samples (``AidedInsSmoother.error_samples``, or
 pointwise RMS of ``Delta`` along
 the track (for the plots), and the relative standard error of the prediction (delta method:
 ``se(RMS) / RMS = std(M^2) / (2 sqrt(S) mean(M^2))``, ``M`` the per-sample maximum).
-Measured ``std(M^2) / mean(M^2)``: 0.78 (alignment) and 0.75 (level) on the paper's nominal
-run with its sensor noise (:func:`nominal_chord_accuracy`), 1.16 and 1.40 in the noise-free
-simplified case of eqs. 29-31 (there the level error is one Gaussian times a shape, ``M^2 ~
-chi^2_1``: ``sqrt 2``). So ``S`` samples give ~``0.39 / sqrt(S)``: 1.7 % at ``S = 500``
-(:data:`DEFAULT_SAMPLES`), 1.2 % at 1000, 3.2 % at 150; a 500-run Monte Carlo's own RMS has
-~1.7 %. Cost on the 30 m run (61 grid epochs of 600; this 2-core machine, loaded): the
-smoother's sampling of the grid epochs ~23-28 ms for 500 samples, the chord errors ~2 ms
-(both about linear in ``S``).
+``std(M^2) / mean(M^2)`` is below 1 on the paper's nominal run with its sensor noise
+(:func:`nominal_chord_accuracy`; ``tests/test_chord_accuracy.py``) and larger in the
+noise-free simplified case of eqs. 29-31 (there the level error is one Gaussian times a
+shape, ``M^2 ~ chi^2_1``: ``sqrt 2``), so the error falls as ``1 / sqrt(S)``, and at
+``S = 500`` (:data:`DEFAULT_SAMPLES`) it is about that of a 500-run Monte Carlo's own RMS.
+The sampling and the chord errors cost about linearly in ``S``.
 :func:`chord_sigma_from_covariance` gives the pointwise sigma exactly from a joint
 covariance instead (``SmootherRecord.joint_covariance`` at the grid epochs).
 
@@ -63,15 +61,16 @@ Sensitivity (Figs. 8-11)
 :func:`sensitivity_curves` runs ``railfmu.estimators.inertial.aided_ins.covariance_analysis`` on
 :func:`nominal_run` (the paper's § 6.1 survey: straight, level, N45E, 30 m at 1 m/s, velocity
 updates at both ends, navigation grade, 0.006 / 0.06 deg) varying one setting at a time.
-At the nominal point the largest pointwise sigma on the chord is 0.979 mm (alignment) and
-0.695 mm (level), the paper's 0.99 and 0.70 mm (its Fig. 12 Monte Carlo, which it calls
-consistent with this covariance analysis: the Monte Carlo's peak RMS over runs,
-``railfmu.experiments.trolley_survey.survey_accuracy``), and the predicted RMS over runs of the max
-is 1.49 mm and 1.18 mm (1.52 and 1.70 times; 20,000 draws); the accelerometer noise
-(10 ug/sqrt(Hz)) makes most of both. As the paper remarks, the level does not depend on the attitude errors,
-the gyro noise or the gyro biases (to < 1e-3), the alignment not on the accelerometer bias,
-position updates at the ends change neither by more than 0.3 %, and both grow with the
-velocity update's sigma (1 mm of alignment at ~0.13 mm/s; the paper's Fig. 8: 0.15 mm/s).
+At the nominal point the largest pointwise sigma on the chord is the paper's 0.99 mm
+(alignment) and 0.70 mm (level) (its Fig. 12 Monte Carlo, which it calls consistent with this
+covariance analysis: the Monte Carlo's peak RMS over runs,
+``railfmu.experiments.trolley_survey.survey_accuracy``; within the tolerance asserted in
+``tests/test_chord_accuracy.py``), and the predicted RMS over runs of the max is clearly
+larger; the accelerometer noise (10 ug/sqrt(Hz)) makes most of both. As the paper remarks,
+the level does not depend on the attitude errors, the gyro noise or the gyro biases, the
+alignment not on the accelerometer bias, position updates at the ends change neither
+noticeably, and both grow with the velocity update's sigma (the paper's Fig. 8: 1 mm of
+alignment at 0.15 mm/s); these remarks are asserted in ``tests/test_chord_accuracy.py``.
 
 Closed forms (eqs. 29-31)
 -------------------------
@@ -131,7 +130,7 @@ from railfmu.estimators.inertial.ins_error_model import DR
 from railfmu.models import earth
 from railfmu.models.track.geometry import vector_distance
 
-#: samples of the joint Gaussian per prediction: ~1.7 % relative standard error, ~25 ms (module doc)
+#: samples of the joint Gaussian per prediction: the precision of a 500-run Monte Carlo (module doc)
 DEFAULT_SAMPLES = 500
 MM = 1e3
 
@@ -295,7 +294,7 @@ class ChordPrediction:
     """Predicted accuracy of a survey's chords from ``n_samples`` error trajectories.
 
     ``sigma_alignment_mm``, ``sigma_level_mm``: the predicted RMS over runs of the per-run
-    max |chord error| (the issue's statistic); ``relative_se_alignment``,
+    max |chord error| (the survey's statistic); ``relative_se_alignment``,
     ``relative_se_level``: their relative standard errors (sampling); ``pointwise_alignment_mm``,
     ``pointwise_level_mm`` (n_points): the RMS of the chord error at each point (its sigma;
     the mean is 0), at distances ``s`` (m)."""
@@ -539,7 +538,7 @@ def sensitivity_curves(axes=None, n_samples: int = 0, seed: int = 1, **nominal) 
     Returns ``{setting: {"x": values (in ``unit``), "unit": str, "alignment_mm": array,
     "level_mm": array, ...}}`` with the largest pointwise sigma of the 30 m chord's errors
     (and ``max_rms_*_mm``, the predicted RMS of the max, when ``n_samples`` > 0: sampled, so
-    with its ~``0.39 / sqrt(n_samples)`` scatter from point to point); ``zupt_sigma`` also has
+    with its ~``1 / sqrt(n_samples)`` scatter from point to point); ``zupt_sigma`` also has
     ``alignment_mm_position``, ``level_mm_position`` with landmark position updates at both
     ends (``landmark_sigma``), and there the initial velocity sigma follows the update's
     (the paper's ``p_dv = sigma_v^2``). ``"nominal"``: the values at the nominal point."""

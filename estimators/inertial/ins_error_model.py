@@ -30,8 +30,9 @@ Dynamics (eq. 2 with the paper's eqs. 3-4; ``omega_in = omega_ie + omega_en``)::
 This is eq. 7 (A) and eq. 8 (G) in their full form: the Earth-rate terms of ``phi`` (the
 ``-Omega sin L``, ``Omega cos L`` entries), the Coriolis terms of ``dv``, and the specific force
 ``f^n`` of the epoch (not the straight-track ``f = (0, 0, -g)`` of the paper's §5 simplification,
-eq. 20). Added to eq. 7 because they cost nothing: the transport rate ``omega_en`` (1.6e-7 rad/s
-at 1 m/s, 0.2 % of the Earth rate) and the vertical gravity gradient ``2 g / a`` (3.1e-6 /s2, the mechanisation's free-air term).
+eq. 20). Added to eq. 7 because they cost nothing: the transport rate ``omega_en`` (1.6e-7
+rad/s at 1 m/s, 0.2 % of the Earth rate) and the vertical gravity gradient ``2 g / a``
+(3.1e-6 /s2, the mechanisation's free-air term).
 Neglected, as in the paper: the rates' dependence on the position and velocity errors
 (``delta omega_in``, ``(2 delta omega_ie + delta omega_en) x v``: coefficients ``v / R`` =
 1.6e-7 /s and below) and the frame difference ``C_n0^n ~ I`` within a survey segment; over
@@ -53,9 +54,9 @@ power; ``Q_d = int_0^T exp(A s) Q_c exp(A^T s) ds`` by three-point Gauss-Legendr
 with the same series at the nodes (exact for integrands of degree <= 5 in ``s``, which covers
 the dominant terms: white specific force into position ``s^2``, white rate into position
 ``s^4``). Against Van Loan's matrix exponential (``railfmu.estimators.core.discretize.van_loan``) on a
-moving trolley's ``A`` (``tests/test_ins_error_model.py``): at ``T = 0.05 s`` ``Phi`` to 2e-15
-(absolute, entries up to 1) and ``Q_d`` to 6e-16 of each entry's scale ``sqrt(Q_ii Q_jj)``; at
-0.5 s 2e-10 and 1.5e-13 (the ``A^5`` term). Stacked over the epochs of a block, it costs a
+moving trolley's ``A``: at ``T = 0.05 s`` ``Phi`` and ``Q_d`` (relative to each entry's scale
+``sqrt(Q_ii Q_jj)``) agree to round-off, at 0.5 s to the truncated ``A^5`` term (the bounds
+asserted in ``tests/test_ins_error_model.py``). Stacked over the epochs of a block, it costs a
 fraction of one ``expm`` per epoch.
 
 Observability (:func:`observability_gramian`, ``tests/test_ins_error_model.py``): a straight

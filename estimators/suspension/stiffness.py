@@ -35,7 +35,8 @@ rate, so one matrix exponential of (:func:`railfmu.estimators.core.discretize.fo
 
     [[A(k1), Bz, Bd], [0, 0, I], [0, 0, 0]] dt
 
-gives ``x_{k+1} = F x_k + G [w_k, dw_k]`` exactly (checked against the FMU: 2e-11 relative).
+gives ``x_{k+1} = F x_k + G [w_k, dw_k]`` exactly (checked against the FMU to round-off in
+``tests/test_suspension.py``).
 The rails are known inputs ``u`` (taken at each sample, held by the FMU's hold in between);
 a sample whose rails are missing is bridged by extrapolating the last rails with their rates.
 A missing sensor (NaN, or masked out) is left out of the update: both observers update with
@@ -44,8 +45,9 @@ the rows present. The observers are designed for ``dt`` = the data's sample time
 Sensor noise levels
 -------------------
 Onat et al. (2016) give no sensor noise levels: its ``R = I`` (§4) is a filter tuning, and as a noise
-level (1 m/s2, 1 rad/s) it would be 10-1000 times the coach signals (ddz_c 0.05-0.1 m/s2,
-dphi_c 2-4e-3 rad/s, dtheta_c 1e-3 rad/s rms on ERRI B176 low level at 20 m/s). We use the
+level (1 m/s2, 1 rad/s) it would be orders of magnitude above the coach signals on ERRI
+B176 low level at 20 m/s (accelerations of hundredths of m/s2, rates of milliradians per
+second). We use the
 "low cost inertial sensor" levels of Muñoz et al., §5.3 (this project's other inertial study):
 :data:`SENSOR_NOISE_STD`, 0.01 m/s2 for every accelerometer and 5e-4 rad/s for every gyro
 (white, per sample at 100 Hz).
@@ -292,8 +294,8 @@ class SuspensionWLS(_CoachObserver):
     weighted *sum of signed residuals*; but the residuals of a linear filter driven by a
     zero-mean track are zero-mean whatever the error in ``k1``, so that sum has no direction
     (``residual="literal"`` keeps this reading, ``theta += beta * mean(gamma . r / sigma)``:
-    on our noise-free 150 s it stays at the initial guess, 326-334 kN/m; with the paper's
-    ``beta`` = 1.5e6 on raw residuals it random-walks to a negative k1 within seconds).
+    on noise-free data it stays near the initial guess; with the paper's ``beta`` = 1.5e6 on
+    raw residuals it random-walks to a negative k1).
     A weighted least-squares estimate
     minimises ``sum_k sum_i gamma_i (r_ik / sigma_i)^2`` over ``theta``; linearised about the
     current ``theta`` the residual is ``r - s dtheta``, ``s = d y_model / d theta``, and the
@@ -320,15 +322,16 @@ class SuspensionWLS(_CoachObserver):
     * ``window`` n = 100 samples (1 s, about one period of the coach bounce and pitch modes,
       1.0 and 1.2 Hz): ``theta`` is updated once per window (``k`` of eq. 11 counts windows).
     * ``beta`` = 0.3: the paper's 1.5e6 belongs to its unstated residual scaling and cannot be
-      transferred. Measured on 150 s of ERRI low-level track (the paper's tuning of the filter):
-      noise-free, within 2 % of 430 kN/m after 9 s and within 5 % of 215 kN/m 9 s after the
-      fault; with the sensor noise (:data:`SENSOR_NOISE_STD`) it settles 2 % (static) to 5 %
-      (after the fault) low.
-      0.1 is about 3 times slower and as biased; 0.5 is noisier.
+      transferred. On ERRI low-level track (the paper's tuning of the filter) it converges to
+      430 kN/m and, after the fault, to 215 kN/m within seconds on noise-free data; with the
+      sensor noise (:data:`SENSOR_NOISE_STD`) it settles somewhat low. 0.1 is slower and as
+      biased; 0.5 is noisier. The convergence time, detection delay and final error are
+      measured by ``railfmu study suspension_fault`` (docs/studies/suspension_fault.md).
     * The filter keeps the paper's tuning (faithful). It is what limits the scheme under noise:
       ``R = I`` is 1e4-1e6 times the sensor variance, so the residuals are barely filtered.
-      With ``r = 1e-4, q = 1e-8`` (closer to the sensors) the same update ends within 0.5 %,
-      converges in 9 s and detects the fault in 8 s (noisy data).
+      With ``r = 1e-4, q = 1e-8`` (closer to the sensors) the same update ends much closer to
+      the truth on noisy data, converging and detecting the fault as fast as the paper's
+      tuning does on noise-free data.
     * ``theta`` is kept >= ``theta_min`` (0.05) so the model stays stable.
 
     Settings: :class:`WLSSettings` (``k1_initial`` N/m, ``beta``, ``window``, ``weights``,
@@ -455,9 +458,11 @@ class SuspensionJoint(_CoachObserver):
     * ``R = diag(sigma^2)``: the sensor noise (:data:`SENSOR_NOISE_STD`); it is also used on
       noise-free data (it only slows the filter slightly there).
     * ``q_theta`` = 1e-4 1/s: random-walk intensity of ``theta`` (1 % per sqrt(s)). It sets
-      the trade-off between tracking a fault and the noise on the estimate: measured, a 50 %
-      drop is within 5 % after about 1.5 s and the static estimate stays within about 1 %
-      with the sensor noise of :data:`SENSOR_NOISE_STD`. 1e-5 halves the jitter but doubles the delay.
+      the trade-off between tracking a fault and the noise on the estimate: a 50 % drop is
+      tracked within seconds and the static estimate stays close to the truth with the sensor
+      noise of :data:`SENSOR_NOISE_STD` (``railfmu study suspension_fault``,
+      docs/studies/suspension_fault.md); a smaller ``q_theta`` lowers the jitter but lengthens
+      the delay.
     * ``q_acc`` = 1e-8 m2/s3 (and rad2/s3) on the velocities: the design model is the
       simulated one, so only a small floor for numerical mismatch.
     * ``P0``: ``theta`` 0.3 (30 % of the initial guess: the paper starts 23 % low), the

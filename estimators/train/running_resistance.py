@@ -41,12 +41,13 @@ orders of magnitude. Two measures keep it sound:
    (the sigma points of ``D P D`` are ``D`` times those of ``P``), so the estimates are the
    textbook filter's, and round-off acts on variances of order 1 instead of on a matrix
    whose entries span 1e-18 to 16.
-Measured on a 32 km run of the shipped line (``tests/test_running_resistance.py``): at α = 0.5,
-where every form is well conditioned, this filter equals filterpy's
-``UnscentedKalmanFilter`` to 1.4e-9 standard deviations; at the paper's settings filterpy's
-textbook sums differ from it by up to 8e-4 σ, the centre-referenced form in SI coordinates by
-8e-5 σ. The covariance is symmetrised; where a clamping process model makes it singular (a stopped
-train) its eigenvalues are floored and the repair is counted (``covariance_repairs``).
+Checked on a 32 km run of the shipped line (``tests/test_running_resistance.py`` asserts the
+bounds): at α = 0.5, where every form is well conditioned, this filter equals filterpy's
+``UnscentedKalmanFilter`` to round-off; at the paper's settings filterpy's textbook sums drift
+from it by a small fraction of a standard deviation, the centre-referenced form in SI
+coordinates by less. The covariance is symmetrised; where a clamping process model makes it
+singular (a stopped train) its eigenvalues are floored and the repair is counted
+(``covariance_repairs``).
 """
 
 from __future__ import annotations
@@ -403,10 +404,10 @@ class ImprovedEstimator(Observer):
        piecewise-constant profile). An interval is a coasting candidate if some window
        holding it has ``|u_w| <= effort_band`` and its speed is above ``min_speed``. A
        segment is a maximal run of candidates, trimmed by a recognition window at each end
-       (a regime change may lie inside the window that let it in), kept if it lasts ``min_coast`` and passes a test
-       against the prior predictive distribution of its mean effort (a speed hold at
-       40 km/h passes the band but not this: its speed does not fall as any plausible
-       resistance would make it)::
+       (a regime change may lie inside the window that let it in), kept if it lasts
+       ``min_coast`` and passes a test against the prior predictive distribution of its mean
+       effort (a speed hold at 40 km/h passes the band but not this: its speed does not fall
+       as any plausible resistance would make it)::
 
            |u_seg| <= test_sigmas sqrt(2 sigma_v^2 / T^2 + sum_j (rho theta0_j phibar_j)^2)
 
@@ -449,27 +450,25 @@ class ImprovedEstimator(Observer):
        instead of following the 1 km/h rounding. The output ``acceleration`` is the mean
        acceleration of the interval that ends at the last fix, ``(v^_k - v^_{k-1}) /
        (t_k - t_{k-1})`` from the filter's speeds (what the regime recognition of §3.2 and
-       the features read: the interval's regime; the state ``a^`` lags it, and scored 0.75
-       regime accuracy against 0.92 over 20 runs), in coasting ``-(r^(v^) + g)``; ``effort``
+       the features read: the interval's regime; the state ``a^`` lags it and recognised the
+       regimes clearly worse), in coasting ``-(r^(v^) + g)``; ``effort``
        = ``acceleration + r^(v^) + g(s^)`` (eq. 1 solved for the effort; 0 in coasting).
 
     Tuning (on simulated 32 km runs of the shipped line with 10 % per-run scatter of each
     Davis coefficient, seeds 1001-1040, not the study's): ``effort_band`` 0.04 N/kg (the
-    paper's 0.025 cuts long coasts into pieces at 10 s rounding noise; 0.04-0.05 equal),
-    one window of trim, ``min_coast`` 30 s, ``test_sigmas`` 4 (3-5 equal),
-    ``prior_rel_sigma`` 0.1 (0.05-0.2 within 10 % of each other), ``r_random_walk`` 0
-    (1e-3 /sqrt(s) and up cost accuracy on constant resistance and did not help with a
-    +30 % drift of r2: the coasting data come late in a run anyway), ``jerk_noise``
-    1e-2 m^2/s^5 (1e-3 to 1e-1 give the same speed error; 1e-5 and below lag the regime
-    changes by up to 1 km/h).
+    paper's 0.025 cuts long coasts into pieces at 10 s rounding noise; slightly wider bands
+    score the same), one window of trim, ``min_coast`` 30 s, ``test_sigmas`` 4 (its
+    neighbours score the same), ``prior_rel_sigma`` 0.1 (insensitive within a factor of two),
+    ``r_random_walk`` 0 (a random walk costs accuracy on constant resistance and did not
+    help with a +30 % drift of r2: the coasting data come late in a run anyway),
+    ``jerk_noise`` 1e-2 m^2/s^5 (a decade either side gives the same speed error; much
+    smaller values lag the regime changes).
 
-    Measured (seeds 1-67 of the same simulation, 10 s fixes unless said; median / p95 of
-    ``resistance_rel_error`` and of ``speed_rmse_kmh``; the paper's UKF beside it):
-    ``standard`` 0.42 % / 1.7 % and 0.23 / 0.30 km/h (UKF 5.2 % / 10.2 %, 0.28 / 0.32
-    km/h); 1 s fixes 0.11 % / 0.42 % and 0.19 / 0.26 km/h (UKF 5.1 % / 10.1 %); 100 % load
-    0.45 % / 1.7 % (UKF 9.3 % / 19.7 %); r2 rising by 30 % over 1500 s, against the truth
-    at the end of the run, 4.1 % / 6.4 % (UKF 11.7 % / 21.5 %): the coasting data lie
-    5-10 min before the end. 0.04 s per run with 10 s fixes (131 fixes), under load.
+    Its accuracy beside the paper's UKF (``resistance_rel_error``, ``speed_rmse_kmh``) for
+    10 s and 1 s fixes, 100 % load and r2 rising by 30 % over 1500 s, and its run time, are
+    measured by ``railfmu study train_resistance`` (docs/studies/train_resistance.md). With
+    a drifting r2 the estimate lags the truth at the end of the run: the coasting data lie
+    minutes before the end.
 
     Settings (SI): ``r0_init``, ``r1_init``, ``r2_init`` (prior mean, N/kg, N/(kg m/s),
     N/(kg (m/s)^2); default the published values), ``prior_rel_sigma`` (-), ``sigma_speed``
@@ -548,7 +547,7 @@ class ImprovedEstimator(Observer):
             self.P[np.ix_(mask.nonzero()[0], mask.nonzero()[0])] = self.R[np.ix_(mask, mask)]
             self._started = bool(mask.all())
         elif mask.all():
-            # kalman.update written out for H = [I 0]: the common case, ~3x cheaper
+            # kalman.update written out for H = [I 0]: the common case, cheaper than the masked form
             P = self.P
             S = P[:2, :2] + self.R
             K = P[:, :2] @ np.linalg.inv(S)

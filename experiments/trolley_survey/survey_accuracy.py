@@ -35,9 +35,10 @@ side by side (:func:`montecarlo_rows`):
 Jiang et al. (2017)'s Fig. 12 figures (0.99 / 0.70 mm) are the peak RMS: the paper says its
 Monte Carlo "is consistent to the result calculated by the covariance analysis previously",
 and that analysis (the largest pointwise sigma, Figs. 8-11) reproduced at the paper's nominal
-run gives 0.979 / 0.695 mm (:func:`railfmu.estimators.inertial.chord_accuracy.nominal_chord_accuracy`), while the
-RMS of the max of the same errors is 1.5-1.7 times larger (a max over 51 correlated points;
-1.49 / 1.18 mm there).
+run gives :data:`NOMINAL_PEAK_SIGMA_MM`
+(:func:`railfmu.estimators.inertial.chord_accuracy.nominal_chord_accuracy`;
+``tests/test_chord_accuracy.py``), while the RMS of the max of the same errors is clearly
+larger (a max over 51 correlated points).
 
 The truth irregularity a figure shows (eq. 1 of the body's true path: the rail's plus the
 trolley's wobble) is ``chord_errors`` of the true positions against the design positions at the
@@ -60,7 +61,7 @@ from railfmu.estimators.inertial.chord_accuracy import (
 )
 
 SMOOTHER = "smoother"
-PREDICTION_SAMPLES = DEFAULT_SAMPLES  # 500: ~1.7 % relative standard error per run (the mean over N runs: / sqrt(N))
+PREDICTION_SAMPLES = DEFAULT_SAMPLES  # a 500-run Monte Carlo's precision per run (their mean: / sqrt(N))
 REPEATABILITY_RUNS = 6  # Jiang et al. (2017), Table 1 and Fig. 15: six runs over the same track
 #: Jiang et al. (2017), Fig. 12 (500 runs): the peak RMS over runs of the chord error (module docstring)
 PAPER_MAX_ERROR_MM = {"alignment": 0.99, "level": 0.70}

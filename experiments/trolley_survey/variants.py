@@ -18,11 +18,11 @@ changes in the trolley, the observers and the run:
   5 m/s2: 0.4 s and 0.2 m each, the 30 s of the paper's run become 30.4 s) and the initial rest
   is short (the chord's first point is the record's first sample, 0.1 s before the ZUPT). With
   them the largest pointwise sigma of the chord errors (exact, from the smoother's joint
-  covariance) is 0.998 / 0.712 mm (alignment / level), 1.019 / 1.025 times the covariance
-  analysis of the paper's constant-speed run (``railfmu.estimators.inertial.chord_accuracy.nominal_chord_accuracy``:
-  0.979 / 0.695 mm); with the Trolley's default ramps (0.5 m/s2: 4 s and 2 m) and a 1 s rest it
-  was 1.17 / 0.90 mm; 2 m/s2 gives 1.04 / 1.06 times, 10 m/s2 1.011 / 1.013. The ramps lie
-  inside the 30 m: the chord grid still has all 51 points, 0 to 25 m;
+  covariance) is within a few percent of the covariance analysis of the paper's constant-speed
+  run (``railfmu.estimators.inertial.chord_accuracy.nominal_chord_accuracy``; the ratio is
+  asserted in ``tests/test_trolley_survey.py``); with the Trolley's default ramps (0.5 m/s2:
+  4 s and 2 m) and a 1 s rest it is clearly larger, and the steeper the ramps the closer it
+  comes. The ramps lie inside the 30 m: the chord grid still has all 51 points, 0 to 25 m;
 * the aided 600 m surveys, navigation grade unless the name ends in ``_tactical`` or
   ``_mems``: ``zupt_60m`` (ZUPT at the stops every 60 m), ``zupt_nhc`` (+ non-holonomic
   constraint), ``zupt_odometer`` (+ odometer), ``zupt_nhc_odometer`` (+ both), ``landmarks``
@@ -39,9 +39,10 @@ changes in the trolley, the observers and the run:
   the trolley's ``wobble_wavelength`` (the SSD binds ``play_wavelength`` to it), damping 0.1
   (the wobble is one sinusoid, a line spectrum: a narrowband oscillator fits it; the default
   ``1/sqrt(2)`` spreads the play over all wavelengths above 2 m and leaves the NHC less to
-  say: 0.75 / 0.44 mm instead of 0.38 / 0.20 mm, RMS over 8 runs of the max chord error of
-  ``zupt_nhc_odometer``, alignment / level), the NHC's sigma 0.1 mm/s (what the play model
-  leaves out). The white NHC that covers the wobble (3 mm/s) gave 1.56 / 1.44 mm.
+  say: larger max chord errors of ``zupt_nhc_odometer``), the NHC's sigma 0.1 mm/s (what the
+  play model leaves out). The white NHC that covers the wobble (3 mm/s) does worse than
+  either. The chord errors are measured by ``railfmu study trolley_survey --variant
+  zupt_nhc_odometer`` (docs/studies/trolley_survey.md).
 
 ``tests/test_trolley_survey.py`` checks that the files are what this writes.
 """

@@ -35,15 +35,14 @@ at ``t``, and an instant that lies less than ``eps min(h, T)`` after ``t`` count
 FMI does not say how a master computes its communication points: ``t0 + n h`` in floating
 point lands just below a sample instant (``2001 * 1e-3 / 1e-3 = 2000.9999999999998``), and a
 master that accumulates ``t += h`` (OMSimulator, FMPy's container FMU) drifts from
-``n h`` by up to 2.2e-5 h after 1e6 steps and 1.8e-3 h after 1e7 steps (measured at
-``h`` = 1 ms and 0.1 ms; the drift grows as ``n^2``). Both give the same ``k`` as the exact
-grid, with margin up to ~2e7 steps. The tolerance is a fraction of the step the FMU sees
-(``fmi2DoStep``'s ``communicationStepSize``), not of ``t``, so it does not grow over a long
-run; ``min(h, T)`` keeps it a fraction of one sample when a step spans several. A sample
-instant further than ``eps min(h, T)`` after ``t`` belongs to the next communication point,
-so a period that is not a multiple of the step keeps its meaning. At ``t0`` (``h = 0``) ``k``
-is 0. The noise at a communication point is therefore the same whatever the step sizes that
-led there, except for an instant within that band.
+``n h`` by a fraction of ``h`` that grows as ``n^2`` and stays below ``eps`` over runs of
+millions of steps. Both give the same ``k`` as the exact grid. The tolerance is a fraction
+of the step the FMU sees (``fmi2DoStep``'s ``communicationStepSize``), not of ``t``, so it
+does not grow over a long run; ``min(h, T)`` keeps it a fraction of one sample when a step
+spans several. A sample instant further than ``eps min(h, T)`` after ``t`` belongs to the
+next communication point, so a period that is not a multiple of the step keeps its meaning.
+At ``t0`` (``h = 0``) ``k`` is 0. The noise at a communication point is therefore the same
+whatever the step sizes that led there, except for an instant within that band.
 
 Inputs, outputs, sigma and bias carry no unit: the FMU is generic and connects to any Real
 output (a unit-less connector is never converted by the SSP reader, ``fmus/ssp_units.py``);
@@ -71,7 +70,7 @@ size give the same noise for the same seed. With ``mix64`` the SplitMix64 output
 
 All integer-to-double conversions are exact (< 2^53). ``log`` and ``cos`` come from the C
 library in both the FMU and :func:`noise` (Python's ``math`` calls libm): numpy's SIMD ``log``
-differs from glibc's in the last bit for ~0.4 % of arguments, so the twin does not use it for
+differs from glibc's in the last bit for a small share of arguments, so the twin does not use it for
 the bit-exact path.
 
 Parameters
@@ -150,7 +149,7 @@ def _libm(fn, x: np.ndarray) -> np.ndarray:
 
 def noise(seed: int, channel: int, k, exact: bool = True) -> np.ndarray:
     """Standard Gaussian w_i(k) of ``channel`` (1..8) at samples ``k`` (array of non-negative
-    integers), bit-identical to the FMU. ``exact=False`` uses numpy's log/cos (about 10x
+    integers), bit-identical to the FMU. ``exact=False`` uses numpy's log/cos (much
     faster; may differ from the FMU in the last bit)."""
     u1, u2 = uniforms(seed, channel, k)
     if exact:

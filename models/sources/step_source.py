@@ -16,8 +16,8 @@ When is ``step_time`` reached? With ``h`` the communication step that ended at `
 
 A step time on the master's grid thus switches exactly there, however the master computes
 its time: ``n h`` in floating point (0.99 + 0.01 may be 0.9999999999999999) or an
-accumulated ``t += h`` (OMSimulator, FMPy's container FMU: 2.2e-5 h off the grid after 1e6
-steps, 1.8e-3 h after 1e7; measured at 1 ms and 0.1 ms). The band is a fraction of the
+accumulated ``t += h`` (OMSimulator, FMPy's container FMU: off the grid by a fraction of
+``h`` that grows as ``n^2``, below ``eps`` over millions of steps). The band is a fraction of the
 step, not of ``t``, so it does not widen over a long run; a step time more than ``eps h``
 after a communication point (between grid points) appears at the next one. In
 initialisation mode (``h = 0``) the comparison is exact: ``y`` is final_value at the start
