@@ -169,8 +169,18 @@ class Model:
             return [u.name for u in self.inputs if u.name in set(o.depends_on)]
         if o.expr is None:
             return []
-        free = {f.name for f in sp.sympify(o.expr).free_symbols}
+        free = self.reads(o.expr)
         return [u.name for u in self.inputs if u.name in free]
+
+    def reads(self, expr: sp.Expr) -> set[str]:
+        """Names of the symbols ``expr``'s value depends on: those in a condition (a switch) and
+        those with a derivative not identically 0 (a free symbol may cancel, as x - x)."""
+        cache = self.__dict__.setdefault("_reads", {})  # the build asks twice (GUID, description)
+        e = sp.sympify(expr)
+        if e not in cache:
+            switches = set().union(*[r.free_symbols for r in e.atoms(sp.core.relational.Relational)])
+            cache[e] = {s.name for s in e.free_symbols if s in switches or sp.diff(e, s) != 0}
+        return cache[e]
 
     def _check_types(self) -> None:
         """What FMI 2.0 and the generator allow: see the module docstring."""

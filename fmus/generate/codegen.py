@@ -98,6 +98,18 @@ def _output_dependencies(model: Model, slots: list[Slot]) -> dict[str, str]:
             for s in slots if s.causality == "output"}
 
 
+def _initial_dependencies(model: Model, o: Output, index: dict[str, int]) -> str | None:
+    """InitialUnknowns: the knowns (time, parameters, state starts, inputs) a generated output
+    reads in initialisation mode, from its expression; None (omitted: FMI's "all knowns") for
+    hand-written C, whose parameter use no definition states."""
+    if not model.generated or o.expr is None:
+        return None
+    free = model.reads(o.expr)
+    names = ["time"] if "t" in free else []
+    names += [v.name for v in (*model.parameters, *model.inputs, *model.states) if v.name in free]
+    return " ".join(str(i) for i in sorted(index[n] for n in names))
+
+
 def model_description(model: Model, guid: str, source_files: list[str]) -> str:
     slots = layout(model)
     units = sorted({s.var.unit for s in slots if s.var.unit})
@@ -148,7 +160,9 @@ def model_description(model: Model, guid: str, source_files: list[str]) -> str:
     L += ['    </Outputs>', '    <InitialUnknowns>']
     for s in slots:
         if s.causality == "output" and s.initial == "calculated":
-            L.append(f'      <Unknown index="{index[s.var.name]}"/>')
+            init = _initial_dependencies(model, s.var, index)
+            L.append(f'      <Unknown index="{index[s.var.name]}"' +
+                     (f' dependencies="{init}"/>' if init is not None else '/>'))
     L += ['    </InitialUnknowns>', '  </ModelStructure>', '</fmiModelDescription>', '']
     return "\n".join(L)
 
