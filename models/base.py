@@ -101,10 +101,14 @@ class State(Variable):
 
 @dataclass
 class Output(Variable):
-    """An output computed from states, inputs and parameters (``expr``), or by hand-written C."""
+    """An output computed from states, inputs and parameters (``expr``), or by hand-written C.
+    ``depends_on``: the inputs the value read right after they are set depends on (direct
+    feedthrough, FMI 2 ModelStructure). Derived from ``expr`` (its free symbols) for generated
+    models; hand-written models with inputs must state it for every output (() = none)."""
 
     expr: sp.Expr | None = None
     start: float | int | bool | str | None = None
+    depends_on: Sequence[str] | None = None
 
 
 @dataclass
@@ -140,6 +144,44 @@ class Model:
             if u.rate is not None and (u.type, self.variable(u.rate).type) != ("Real", "Real"):
                 raise ValueError(f"model {self.identifier}: input {u.name}: a rate needs two Real inputs")
         self._check_types()
+        self._check_dependencies()
+
+    def _check_dependencies(self) -> None:
+        """Every output's direct feedthrough is known (declared or derivable) and names inputs."""
+        inputs = {u.name for u in self.inputs}
+        for o in self.outputs:
+            where = f"model {self.identifier}: output {o.name}"
+            if o.depends_on is None:
+                if o.expr is None and inputs:
+                    raise ValueError(f"{where}: hand-written with inputs: declare depends_on")
+                continue
+            unknown = set(o.depends_on) - inputs
+            if unknown:
+                raise ValueError(f"{where}: depends_on names no input: {sorted(unknown)}")
+            if o.expr is not None and set(o.depends_on) != set(self.feedthrough(o)):
+                raise ValueError(f"{where}: depends_on {sorted(o.depends_on)} differs from its "
+                                 f"expression's inputs {sorted(self.feedthrough(o))}")
+
+    def feedthrough(self, o: "Output") -> list[str]:
+        """The inputs output ``o`` depends on directly, in input order. From the expression's
+        free symbols: right after inputs are set the first-order hold has not started (tau = 0),
+        so a rate input counts only where the expression itself uses it."""
+        if o.depends_on is not None and o.expr is None:
+            return [u.name for u in self.inputs if u.name in set(o.depends_on)]
+        if o.expr is None:
+            return []
+        free = self.reads(o.expr)
+        return [u.name for u in self.inputs if u.name in free]
+
+    def reads(self, expr: sp.Expr) -> set[str]:
+        """Names of the symbols ``expr``'s value depends on: those in a condition (a switch) and
+        those with a derivative not identically 0 (a free symbol may cancel, as x - x)."""
+        cache = self.__dict__.setdefault("_reads", {})  # the build asks twice (GUID, description)
+        e = sp.sympify(expr)
+        if e not in cache:
+            switches = set().union(*[r.free_symbols for r in e.atoms(sp.core.relational.Relational)])
+            cache[e] = {s.name for s in e.free_symbols if s in switches or sp.diff(e, s) != 0}
+        return cache[e]
 
     def _check_types(self) -> None:
         """What FMI 2.0 and the generator allow: see the module docstring."""

@@ -36,6 +36,9 @@ class Component:
     fmu: Path
     parameters: dict[str, Value] = field(default_factory=dict)  # FMU variable name -> value
     model: object | None = field(default=None, repr=False, compare=False)  # fmpy ModelDescription
+    # units the SSD's connectors give variables the FMU declares without one (a generic
+    # channel): name -> railfmu.fmus.ssp.units.Unit; an exported SSP declares them in the FMU
+    units: dict = field(default_factory=dict, repr=False, compare=False)
     _by_name: dict | None = field(default=None, init=False, repr=False, compare=False)
 
     @property

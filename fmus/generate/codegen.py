@@ -90,23 +90,24 @@ def _fmt(x, type_: str = "Real") -> str:
 
 
 def _output_dependencies(model: Model, slots: list[Slot]) -> dict[str, str]:
-    """Direct feedthrough: an output depends on the inputs that appear in its expression.
-    Hand-written models declare none (pure sources), states never depend on inputs."""
+    """Direct feedthrough (Model.feedthrough): from the expression, or as a hand-written model
+    declares it; states never depend on inputs."""
     index = {s.var.name: i + 1 for i, s in enumerate(slots)}
-    deps = {}
-    for s in slots:
-        if s.causality != "output":
-            continue
-        names = []
-        if isinstance(s.var, Output) and s.var.expr is not None:
-            # right after inputs are set the first-order hold has not started (tau = 0), so a
-            # rate input is no direct dependency
-            free = {f.name for f in s.var.expr.free_symbols}
-            names = [u.name for u in model.inputs if u.name in free]
-        elif isinstance(s.var, Output) and model.inputs:
-            names = [u.name for u in model.inputs]  # unknown: hand-written, assume all
-        deps[s.var.name] = " ".join(str(index[n]) for n in names)
-    return deps
+    return {s.var.name: " ".join(str(index[n]) for n in
+                                 (model.feedthrough(s.var) if isinstance(s.var, Output) else []))
+            for s in slots if s.causality == "output"}
+
+
+def _initial_dependencies(model: Model, o: Output, index: dict[str, int]) -> str | None:
+    """InitialUnknowns: the knowns (time, parameters, state starts, inputs) a generated output
+    reads in initialisation mode, from its expression; None (omitted: FMI's "all knowns") for
+    hand-written C, whose parameter use no definition states."""
+    if not model.generated or o.expr is None:
+        return None
+    free = model.reads(o.expr)
+    names = ["time"] if "t" in free else []
+    names += [v.name for v in (*model.parameters, *model.inputs, *model.states) if v.name in free]
+    return " ".join(str(i) for i in sorted(index[n] for n in names))
 
 
 def model_description(model: Model, guid: str, source_files: list[str]) -> str:
@@ -159,7 +160,9 @@ def model_description(model: Model, guid: str, source_files: list[str]) -> str:
     L += ['    </Outputs>', '    <InitialUnknowns>']
     for s in slots:
         if s.causality == "output" and s.initial == "calculated":
-            L.append(f'      <Unknown index="{index[s.var.name]}"/>')
+            init = _initial_dependencies(model, s.var, index)
+            L.append(f'      <Unknown index="{index[s.var.name]}"' +
+                     (f' dependencies="{init}"/>' if init is not None else '/>'))
     L += ['    </InitialUnknowns>', '  </ModelStructure>', '</fmiModelDescription>', '']
     return "\n".join(L)
 

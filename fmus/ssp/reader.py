@@ -238,7 +238,8 @@ class _Reader:
         self._shared_agree()
         start, stop, step = self._time(*times, need=need_time)
         system = System(name=self.doc.get("name") or self.system.get("name"),
-                        components=[Component(c.name, c.fmu, dict(c.params), model=c.md)
+                        components=[Component(c.name, c.fmu, dict(c.params), model=c.md,
+                                              units=self._generic_units(c))
                                     for c in self.comps.values()],
                         connections=connections, start_time=start, stop_time=stop, step_size=step,
                         record=record, observers=observers,
@@ -300,6 +301,12 @@ class _Reader:
         if key not in self._mds:
             self._mds[key] = read_model(fmu, where)
         return self._mds[key]
+
+    def _generic_units(self, comp: _Comp) -> dict:
+        """Connector units of Real variables the FMU declares without a unit."""
+        view = self.ssd_units.then(comp.units)
+        return {n: view.get(u) for n, u in comp.connectors.items()
+                if u and not comp.vars[n].unit and view.get(u) is not None}
 
     def _connector(self, comp: _Comp, el) -> None:
         """A declared connector must match its FMU variable: kind vs causality (FMI 2.0), type,

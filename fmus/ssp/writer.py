@@ -14,6 +14,13 @@ provides, so the archive runs anywhere without the original file. Components tha
 FMU share one copy holding all their files (libcosim unpacks an FMU once per GUID, so two
 copies that differ only in resources/ would find one set of files). Reading the archive back
 gives an equal System (apart from paths and those file names).
+
+A generic FMU (StepSource, SensorNoise, SignalTable) has unit-less channels; the SSD gives
+them a unit on its connectors. Importers that take a connection's units from the FMUs
+(OMSimulator 3.0: "Unit mismatch in connection") would refuse ``fault.y -> coach.k1``, so
+such a component gets its own copy of the FMU whose modelDescription declares those units
+(a unit is no part of the C code: same binary, same GUID; every copy carries all files of
+the FMU, for libcosim). The SSD connectors keep the units, so railfmu reads the same System.
 """
 
 from __future__ import annotations
@@ -48,8 +55,9 @@ def write_ssp(system: System, out: Path) -> Path:
     mds = {c.name: c.md for c in system.components}
     files = {c.name: _parameter_files(c) for c in system.components}
     bundles = _bundles(system, files)
-    resources = _resource_names(system)
-    doc = _document(system, mds, resources, files)
+    generic = _generic_units(system)
+    resources = _resource_names(system, generic)
+    doc = _document(system, mds, resources, files, generic)
     problems = schema_problems(doc, "ssd", "SystemStructure.ssd")
     if problems:  # our own output: a bug, not a user error
         raise RuntimeError(f"write_ssp produced an invalid SSD: {problems[0]}")
@@ -65,8 +73,8 @@ def write_ssp(system: System, out: Path) -> Path:
                     continue
                 written.add(resources[c.name])
                 bundle = bundles[Path(c.fmu).resolve()]
-                if bundle:
-                    zf.writestr(resources[c.name], _with_resources(Path(c.fmu), bundle))
+                if bundle or generic.get(c.name):
+                    zf.writestr(resources[c.name], _with_resources(Path(c.fmu), bundle, generic.get(c.name)))
                 else:
                     zf.write(c.fmu, resources[c.name])
         os.replace(tmp, out)  # a reader never sees half an archive
@@ -75,11 +83,32 @@ def write_ssp(system: System, out: Path) -> Path:
     return out
 
 
-def _resource_names(system: System) -> dict[str, str]:
-    """Component -> 'resources/<file>.fmu': one copy per FMU file, distinct names."""
+def _generic_units(system: System) -> dict[str, dict]:
+    """Component -> {variable: Unit} for the Real variables its FMU declares without a unit that
+    the system gives one: the SSD's connector (Component.units), else an observer's signal."""
+    observed = {sig: u for o in system.observers for sig, u in o.units.items()}
+    out: dict[str, dict] = {}
+    for c in system.components:
+        units = dict(c.units)
+        for v in c.md.modelVariables:
+            if v.type == "Real" and not v.unit and v.name not in units and f"{c.name}.{v.name}" in observed:
+                units[v.name] = observed[f"{c.name}.{v.name}"]
+        units = {n: u for n, u in units.items()
+                 if n in c.variables and c.variables[n].type == "Real" and not c.variables[n].unit}
+        if units:
+            out[c.name] = units
+    return out
+
+
+def _resource_names(system: System, generic: dict[str, dict] | None = None) -> dict[str, str]:
+    """Component -> 'resources/<file>.fmu': one copy per FMU file, distinct names; a component
+    whose FMU declares units for it (``generic``) has its own copy."""
     by_file: dict[Path, str] = {}
     out = {}
     for c in system.components:
+        if (generic or {}).get(c.name):
+            out[c.name] = f"resources/{c.name}_{Path(c.fmu).name}"
+            continue
         fmu = Path(c.fmu).resolve()
         if fmu not in by_file:
             name = f"resources/{fmu.name}"
@@ -123,16 +152,50 @@ def _parameter_files(c) -> dict[str, tuple[Path, str]]:
     return out
 
 
-def _with_resources(fmu: Path, files: dict[Path, str]) -> bytes:
-    """The FMU archive with ``files`` ({path: name}) added to its resources/ (the rest copied
-    unchanged)."""
+def _with_resources(fmu: Path, files: dict[Path, str], units: dict | None = None) -> bytes:
+    """The FMU archive with ``files`` ({path: name}) added to its resources/ and ``units``
+    ({variable: Unit}) declared in its modelDescription (the rest copied unchanged)."""
     buf = io.BytesIO()
     with zipfile.ZipFile(fmu) as src, zipfile.ZipFile(buf, "w", zipfile.ZIP_DEFLATED) as dst:
         for info in src.infolist():
-            dst.writestr(info, src.read(info))
+            data = src.read(info)
+            if units and info.filename == "modelDescription.xml":
+                data = _declare_units(data, units)
+            dst.writestr(info, data)
         for path, inner in files.items():
             dst.write(path, f"resources/{inner}")
     return buf.getvalue()
+
+
+_MD_AFTER_UNITS = ("TypeDefinitions", "LogCategories", "DefaultExperiment", "VendorAnnotations",
+                   "ModelVariables")  # FMI 2.0 order: UnitDefinitions comes before these
+
+
+def _declare_units(md_xml: bytes, units: dict) -> bytes:
+    """modelDescription.xml with ``unit`` on the Real of each variable in ``units`` and each
+    unit defined in UnitDefinitions (with its SI base units, factor and offset)."""
+    root = etree.fromstring(md_xml)
+    for sv in root.iterfind("ModelVariables/ScalarVariable"):
+        if sv.get("name") in units:
+            sv.find("Real").set("unit", units[sv.get("name")].name)
+    defs = root.find("UnitDefinitions")
+    if defs is None:
+        defs = etree.Element("UnitDefinitions")
+        nxt = next(el for el in root if el.tag in _MD_AFTER_UNITS)
+        nxt.addprevious(defs)
+    have = {u.get("name") for u in defs.iterfind("Unit")}
+    for u in sorted({u.name: u for u in units.values()}.values(), key=lambda u: u.name):
+        if u.name in have:
+            continue
+        base = etree.SubElement(etree.SubElement(defs, "Unit", name=u.name), "BaseUnit")
+        for b, e in zip(BASE, u.exponents):
+            if e:
+                base.set(b, str(e))
+        if u.factor != 1.0:
+            base.set("factor", _num(u.factor))
+        if u.offset != 0.0:
+            base.set("offset", _num(u.offset))
+    return etree.tostring(root, xml_declaration=True, encoding="UTF-8")
 
 
 def _sub(parent, tag: str, **attrs):
@@ -148,7 +211,7 @@ def _num(x: float) -> str:
     return repr(float(x))  # shortest text that reads back to the same double
 
 
-def _document(system: System, mds: dict, resources: dict[str, str], files: dict):
+def _document(system: System, mds: dict, resources: dict[str, str], files: dict, generic: dict):
     nsmap = {"ssd": SSD_NS, "ssc": SSC_NS, "ssv": SSV_NS, "rf": RF_NS, "osp": OSP_NS, "oms": OMS_NS}
     doc = etree.Element(f"{{{SSD_NS}}}SystemStructureDescription", nsmap=nsmap, version="1.0",
                         name=system.name)
@@ -158,7 +221,6 @@ def _document(system: System, mds: dict, resources: dict[str, str], files: dict)
     elements = _sub(sys_el, "ssd:Elements")
     used_units: dict[str, Units] = {}
     shown = _shown_variables(system)
-    observed_units = {sig: u for o in system.observers for sig, u in o.units.items()}
     for c in system.components:
         md = mds[c.name]
         units = Units(from_fmu(md)).then(OURS)
@@ -170,9 +232,9 @@ def _document(system: System, mds: dict, resources: dict[str, str], files: dict)
             for v in declared:
                 conn = _sub(connectors, "ssd:Connector", name=v.name, kind=v.causality)
                 unit, where = v.unit, units
-                seen = observed_units.get(f"{c.name}.{v.name}")
-                if not unit and seen is not None:  # a unit the SSD gave an FMU variable without one
-                    unit, where = seen.name, Units({seen.name: seen}).then(OURS)
+                given = generic.get(c.name, {}).get(v.name)
+                if not unit and given is not None:  # now declared by this component's FMU copy
+                    unit, where = given.name, Units({given.name: given}).then(OURS)
                 _sub(conn, f"ssc:{v.type}", unit=unit if v.type == "Real" and unit else None)
                 if v.type == "Real" and unit:
                     used_units[unit] = where
@@ -182,7 +244,8 @@ def _document(system: System, mds: dict, resources: dict[str, str], files: dict)
         conns = _sub(sys_el, "ssd:Connections")
         variables = {c.name: {v.name: v for v in mds[c.name].modelVariables} for c in system.components}
         for k in system.connections:
-            su, du = variables[k.src][k.src_var].unit, variables[k.dst][k.dst_var].unit
+            su = variables[k.src][k.src_var].unit or _unit_name(generic, k.src, k.src_var)
+            du = variables[k.dst][k.dst_var].unit or _unit_name(generic, k.dst, k.dst_var)
             # the map below is complete: a reader must not convert units on top of it
             suppress = "true" if su and du and su != du else None
             el = _sub(conns, "ssd:Connection", startElement=k.src, startConnector=k.src_var,
@@ -193,6 +256,11 @@ def _document(system: System, mds: dict, resources: dict[str, str], files: dict)
     _units(doc, used_units)
     _experiment(doc, system)
     return doc
+
+
+def _unit_name(generic: dict, comp: str, var: str) -> str | None:
+    u = generic.get(comp, {}).get(var)
+    return u.name if u is not None else None
 
 
 def _shown_variables(system: System) -> dict[str, set[str]]:

@@ -79,7 +79,8 @@ def build() -> Model:
                   min=0, max=1, source=src),
         Parameter("file", "CSV table: header line with 'time' or 'time_s' (s) first, then named columns; an "
                   "absolute path or relative to the FMU's resources/ (example.csv is shipped); "
-                  "empty = no table, every channel 0", start="", type="String", source=src),
+                  "empty = no table, every channel 0 (then no column may be bound)", start="", type="String",
+                  source=src),
     ]
     parameters += [Parameter(f"column_{k}", f"Name of the CSV column that y_{k} plays (empty: "
                              "unbound, 0)", start="", type="String", source=src)

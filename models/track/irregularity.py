@@ -680,16 +680,19 @@ def _axle_positions() -> list[Parameter]:
 
 
 def _outputs() -> list[Output]:
+    # feedthrough (distance_input true): every output reads distance; the rates are
+    # speed d/ds, and speed also moves the step's reach tolerance (STEP_TOLERANCE |v| h)
+    both = ("distance", "speed")
     out = [Output("position", "track position s_1 of the leading wheelset (s_start + V t, or "
-                  "s_start + distance)", unit="m")]
+                  "s_start + distance)", unit="m", depends_on=("distance",))]
     for i in range(1, 5):
         out += [
-            Output(f"alignment_{i}", f"lateral alignment of both rails at wheelset {i}", unit="m"),
-            Output(f"alignment_rate_{i}", f"time derivative of alignment_{i} (v d/ds)", unit="m/s"),
-            Output(f"vertical_left_{i}", f"vertical deviation of the left rail at wheelset {i}", unit="m"),
-            Output(f"vertical_right_{i}", f"vertical deviation of the right rail at wheelset {i}", unit="m"),
-            Output(f"vertical_left_rate_{i}", f"time derivative of vertical_left_{i} (v d/ds)", unit="m/s"),
-            Output(f"vertical_right_rate_{i}", f"time derivative of vertical_right_{i} (v d/ds)", unit="m/s"),
+            Output(f"alignment_{i}", f"lateral alignment of both rails at wheelset {i}", unit="m", depends_on=both),
+            Output(f"alignment_rate_{i}", f"time derivative of alignment_{i} (v d/ds)", unit="m/s", depends_on=both),
+            Output(f"vertical_left_{i}", f"vertical deviation of the left rail at wheelset {i}", unit="m", depends_on=both),
+            Output(f"vertical_right_{i}", f"vertical deviation of the right rail at wheelset {i}", unit="m", depends_on=both),
+            Output(f"vertical_left_rate_{i}", f"time derivative of vertical_left_{i} (v d/ds)", unit="m/s", depends_on=both),
+            Output(f"vertical_right_rate_{i}", f"time derivative of vertical_right_{i} (v d/ds)", unit="m/s", depends_on=both),
         ]
     return out
 

@@ -105,21 +105,24 @@ def build() -> Model:
     ]
     inputs = [Input("s", "Train position", "m", 0.0), Input("v", "Train speed", "m/s", 0.0),
               Input("speed_limit", "Line speed limit at s", "m/s", 40.0 * KMH)]
+    # the decision reads (s, v, speed_limit); the style and the memory of earlier points do not
+    decided = ("s", "v", "speed_limit")
     outputs = [
-        Output("command", "Traction/brake command to the train, -1..1", ""),
+        Output("command", "Traction/brake command to the train, -1..1", "", depends_on=decided),
         Output("regime", "True driving regime: 0 standstill, 1 traction, 2 cruising, 3 coasting, "
-               "4 braking", type="Integer"),
-        Output("mode", "Driver mode 0-8 (models/driver.py)", type="Integer"),
-        Output("mode_before", "Mode at the previous communication point (memory)", type="Integer"),
-        Output("decision_time", "Communication point at which mode was decided (memory)", "s"),
-        Output("cruise_target", "Style: cruise target v_c", "m/s"),
-        Output("coasting_point", "Style: coasting point s_c", "m"),
-        Output("traction_fraction", "Style: traction fraction f", ""),
-        Output("cycles", "Style: cruising by traction/coast cycles (else holding)", type="Boolean"),
-        *[Output(f"brake_rate_{k}", f"Style: brake rate in ATB-EG speed step {k} ({band} km/h)", "m/s2")
+               "4 braking", type="Integer", depends_on=decided),
+        Output("mode", "Driver mode 0-8 (models/driver.py)", type="Integer", depends_on=decided),
+        Output("mode_before", "Mode at the previous communication point (memory)", type="Integer", depends_on=()),
+        Output("decision_time", "Communication point at which mode was decided (memory)", "s", depends_on=()),
+        Output("cruise_target", "Style: cruise target v_c", "m/s", depends_on=()),
+        Output("coasting_point", "Style: coasting point s_c", "m", depends_on=()),
+        Output("traction_fraction", "Style: traction fraction f", "", depends_on=()),
+        Output("cycles", "Style: cruising by traction/coast cycles (else holding)", type="Boolean", depends_on=()),
+        *[Output(f"brake_rate_{k}", f"Style: brake rate in ATB-EG speed step {k} ({band} km/h)", "m/s2", depends_on=())
           for k, band in enumerate(("> 130", "130-80", "80-60", "60-40", "< 40"), 1)],
-        Output("stop_position", "Stopping point L: the line profile's last position", "m"),
-        Output("stop_time", "Communication point at which the train stopped (memory; 0 before)", "s"),
+        Output("stop_position", "Stopping point L: the line profile's last position", "m", depends_on=()),
+        Output("stop_time", "Communication point at which the train stopped (memory; 0 before)", "s",
+               depends_on=("v",))  # STOPPED follows BRAKE_STOP alone, where only v decides,
     ]
     return Model(
         identifier="Driver",

@@ -45,11 +45,11 @@ def build() -> Model:
     inputs = [Input("s_true", "True position along the line", "m", 0.0),
               Input("v_true", "True speed", "m/s", 0.0)]
     outputs = [
-        Output("position", "Measured position (valid where valid is true)", "m"),
-        Output("speed", "Measured speed: speed_kmh / 3.6", "m/s"),
-        Output("speed_kmh", "Measured speed as the receiver reports it, in km/h, rounded", ""),
-        Output("valid", "True at the communication point that reaches a new fix", type="Boolean"),
-        Output("sample", "Index k of the current fix", type="Integer"),
+        Output("position", "Measured position (valid where valid is true)", "m", depends_on=("s_true",)),
+        Output("speed", "Measured speed: speed_kmh / 3.6", "m/s", depends_on=("v_true",)),
+        Output("speed_kmh", "Measured speed as the receiver reports it, in km/h, rounded", "", depends_on=("v_true",)),
+        Output("valid", "True at the communication point that reaches a new fix", type="Boolean", depends_on=()),
+        Output("sample", "Index k of the current fix", type="Integer", depends_on=()),
     ]
     return Model(
         identifier="GnssReceiver",

@@ -122,15 +122,19 @@ def build() -> Model:
     ]
     states = [State("s", "Position along the line", "m", 0.0),
               State("v", "Speed", "m/s", 0.0)]
+    # feedthrough: the effort reads the command, or effort_set where use_effort_set; the line
+    # outputs read the position (a state) only; s_set, v_set, set_state act in fmi2DoStep
+    effort = ("command", "effort_set", "use_effort_set")
+    davis = ("r0", "r1", "r2")
     outputs = [
-        Output("acceleration", "dv/dt at the communication point (eq. 1)", "m/s2"),
-        Output("effort", "Applied effort F_t - F_b (traction positive, brake negative)", "N"),
-        Output("effort_specific", "Mass-specific applied effort f_t - f_b", "N/kg"),
-        Output("power", "Applied power (F_t - F_b) v", "W"),
-        Output("resistance_specific", "Running resistance r(v) (eq. 2)", "N/kg"),
-        Output("gradient", "Line gradient at s (positive uphill)", ""),
-        Output("gradient_specific", "Line term g(s) = g0 (i / 1000 + w_c) / gamma: gradient and curve", "N/kg"),
-        Output("speed_limit", "Line speed limit at s", "m/s"),
+        Output("acceleration", "dv/dt at the communication point (eq. 1)", "m/s2", depends_on=effort + davis),
+        Output("effort", "Applied effort F_t - F_b (traction positive, brake negative)", "N", depends_on=effort),
+        Output("effort_specific", "Mass-specific applied effort f_t - f_b", "N/kg", depends_on=effort),
+        Output("power", "Applied power (F_t - F_b) v", "W", depends_on=effort),
+        Output("resistance_specific", "Running resistance r(v) (eq. 2)", "N/kg", depends_on=davis),
+        Output("gradient", "Line gradient at s (positive uphill)", "", depends_on=()),
+        Output("gradient_specific", "Line term g(s) = g0 (i / 1000 + w_c) / gamma: gradient and curve", "N/kg", depends_on=()),
+        Output("speed_limit", "Line speed limit at s", "m/s", depends_on=()),
     ]
     return Model(
         identifier="TrainLongitudinal",

@@ -282,7 +282,21 @@ static int build_table(ModelInstance *m) {
     Table *d;
     size_t k;
     model_free(m);
-    if (!*file) return 0; /* no table: every channel 0 */
+    if (!*file) {
+        /* no table and nothing bound: a source of zeros (a placeholder channel); a bound
+           column without a file is an importer that dropped the file: never zeros */
+        for (k = 0; k < N_REAL_CHANNELS + N_BOOLEAN_CHANNELS + N_INTEGER_CHANNELS; k++) {
+            const size_t vr = k < N_REAL_CHANNELS ? VRS_REAL_COL(k)
+                              : k < N_REAL_CHANNELS + N_BOOLEAN_CHANNELS ? VRS_BOOL_COL(k - N_REAL_CHANNELS)
+                              : VRS_INT_COL(k - N_REAL_CHANNELS - N_BOOLEAN_CHANNELS);
+            if (*param_string(m, vr)) {
+                model_error(m, "parameter file is empty, but %s = '%s' asks for a column of it",
+                            model_string_info[vr].name, param_string(m, vr));
+                return 1;
+            }
+        }
+        return 0;
+    }
     d = (Table *)calloc(1, sizeof *d);
     if (!d) {
         model_error(m, "file %s: out of memory", file);

@@ -100,6 +100,11 @@ static int tg_read(ModelInstance *m, TrackGeom *g, const char *file) {
     TgRow *H = NULL, *V = NULL, r;
     size_t nh = 0, nv = 0, ch = 0, cv = 0, i, j, ncol = 6;
     int rc;
+    if (!*file) {
+        model_error(m, "parameter track_file is empty: a track element table CSV (%s,...) is needed",
+                    TG_COLUMNS[0]);
+        return 1;
+    }
     if (csv_open(&t, m, "track_file", file, CSV_SKIP_BOM)) return 1;
     for (j = 0; j < t.ncol; j++)
         if ((t.ncol != 6 && t.ncol != 7) || strcmp(t.header[j], TG_COLUMNS[j]) != 0)
