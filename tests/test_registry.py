@@ -16,6 +16,7 @@ from railfmu.estimators.inertial.aided_ins import AidedInsSmoother
 from railfmu.estimators.inertial.ins_observer import StrapdownINS
 from railfmu.estimators.suspension.stiffness import SuspensionJoint, SuspensionWLS
 from railfmu.estimators.track.alignment import AlignmentKalmanFilter, AlignmentRTSSmoother
+from railfmu.estimators.train.coasting_em import CoastingEM
 from railfmu.estimators.train.running_resistance import ImprovedEstimator, PaperUKF
 from railfmu.experiments.engine import registry
 from railfmu.experiments.engine.fmu_process import FmuPaperUKF
@@ -28,6 +29,7 @@ BUILT_IN = {
     "suspension_wls": SuspensionWLS, "suspension_joint": SuspensionJoint,
     "resistance_ukf_paper": PaperUKF, "resistance_coasting": ImprovedEstimator,
     "resistance_ukf_fmu": FmuPaperUKF, "strapdown_ins": StrapdownINS, "aided_ins_smoother": AidedInsSmoother,
+    "resistance_coasting_em": CoastingEM,
 }
 
 #: a third party's estimator, in its own module (not ours, not a mock of ours)
