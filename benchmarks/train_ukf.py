@@ -6,7 +6,7 @@ processes all of them, best of --repeat passes (on a shared machine the minimum 
 disturbed number):
 
   PaperUKF discrete   Cunillera et al. (2022) as written: eq. 4, centre-referenced UT in
-                      scaled coordinates (estimators/running_resistance.py)
+                      scaled coordinates (estimators/train/running_resistance.py)
   PaperUKF ode        the same filter with eq. 1 integrated by RK4 (0.05 s sub-steps)
   ImprovedEstimator   coasting segments + prior, kinematic Kalman filter (SSD: improved)
   filterpy UKF        filterpy.kalman.UnscentedKalmanFilter with the paper's settings and

@@ -1,4 +1,4 @@
-"""The ZUPT-aided INS smoother (estimators/aided_ins.py) on the trolley survey's record
+"""The ZUPT-aided INS smoother (estimators/inertial/aided_ins.py) on the trolley survey's record
 (navigation grade, 150 s: 10 s rest, stops every 60 m): the ideal IMU's numerical floor, the
 open-loop filter + RTS against railfmu.estimators.core.smoothers.rts, closed loop against open loop, the
 sampled smoothing errors against the brute-force joint covariance, the filter's consistency
@@ -361,7 +361,7 @@ def test_nhc_odometer_landmarks(record):
     assert est[:, 9:12].max() < 0.2  # from 10 m of P0
 
 
-# -- the wheel-rail play as shaping-filter states (play_model="shaping", estimators/rail_play.py) --
+# -- the wheel-rail play as shaping-filter states (play_model="shaping", estimators/inertial/rail_play.py) --
 
 def test_zero_play_shaping_is_the_white_nhc(record):
     """play_model="shaping" with zero play sigmas: the four play states have zero prior and zero

@@ -1,4 +1,4 @@
-"""The alignment Kalman filter of Muñoz et al. (estimators/alignment.py) on data from the real FMUs:
+"""The alignment Kalman filter of Muñoz et al. (estimators/track/alignment.py) on data from the real FMUs:
 TrackIrregularity -> WheelsetLateral, sensors without noise (the design model is the
 simulated model, so this is the filter's own accuracy, not the paper's CM validation)."""
 

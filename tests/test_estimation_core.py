@@ -1,4 +1,4 @@
-"""The estimation core (estimators/discretize.py, kalman.py, smoothers.py, ukf.py) alone,
+"""The estimation core (estimators/core/discretize.py, kalman.py, smoothers.py, ukf.py) alone,
 against closed forms, textbook cases and independent implementations."""
 
 import math

@@ -1,4 +1,4 @@
-"""ImuErrors FMU (models/imu_errors.py, fmus/native/models/ImuErrors.c): the C equals its Python
+"""ImuErrors FMU (models/inertial/imu_errors.py, fmus/native/models/ImuErrors.c): the C equals its Python
 twin bit for bit, the ideal IMU passes its input through bit for bit, the Gauss-Markov
 discretisation equals Van Loan's at 50 digits for any step, the Allan deviation of each grade
 at rest reads back its datasheet numbers, the deterministic errors follow their closed forms,

@@ -1,4 +1,4 @@
-"""The INS error model of the aided filter (estimators/ins_error_model.py): its sampling against
+"""The INS error model of the aided filter (estimators/inertial/ins_error_model.py): its sampling against
 Van Loan's matrix exponential, its error growth against the nonlinear strapdown INS run twice
 on the trolley's increments, the measurement rows against the nonlinear functions, and the
 observability statement of its docstring."""

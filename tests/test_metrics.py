@@ -1,4 +1,4 @@
-"""EN 13848 band metrics (estimators/metrics.py): Muñoz et al., eq. 32, on synthetic profiles."""
+"""EN 13848 band metrics (estimators/track/metrics.py): Muñoz et al., eq. 32, on synthetic profiles."""
 
 import numpy as np
 import pytest
@@ -28,7 +28,7 @@ def test_bandpass_passes_and_rejects():
     """10 m lies in D1: gain 1; D3 (70-200 m) passes well under 1 % (frequency response
     6e-9), away from the record ends. Measured on 2 km, 300 m from both ends: D1 1.0002, D3
     0.23 %. At the ends the reflection of a 10 m wave leaves a long D3 transient: over the
-    whole of a 400 m run D3 reads 5 % of the 10 m wave (see estimators/metrics.py)."""
+    whole of a 400 m run D3 reads 5 % of the 10 m wave (see estimators/track/metrics.py)."""
     x = sine(10.0, s=S_LONG)
     mid = (S_LONG >= 300) & (S_LONG <= S_LONG[-1] - 300)
     g_d1 = rms(bandpass(x, V, DT, "D1")[mid]) / rms(x[mid])

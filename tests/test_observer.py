@@ -1,4 +1,4 @@
-"""The observer interface (estimators/observer.py) on data from the real FMUs: online step by
+"""The observer interface (estimators/core/observer.py) on data from the real FMUs: online step by
 step equals offline, CSV equals arrays, missing channels are left out and counted."""
 
 import numpy as np

@@ -1,4 +1,4 @@
-"""The observer bank (experiments/observers.py) on real FMU runs: multi-rate feeding, missing
+"""The observer bank (experiments/engine/observer_bank.py) on real FMU runs: multi-rate feeding, missing
 channels (NaN, valid flags, events), offline observers, unit conversion and unit mismatches.
 
 The observers here are stubs that echo what they are fed, so every test can check the exact

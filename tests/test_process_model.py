@@ -1,5 +1,5 @@
 """An FMU as the process model of a sigma-point filter (``fmus/cosim/process_model.py``) and
-``ukf_fmu`` (``experiments/fmu_process.py``): TrainLongitudinal's process-model inputs
+``ukf_fmu`` (``experiments/engine/fmu_process.py``): TrainLongitudinal's process-model inputs
 (``set_state``, ``use_effort_set``) leave every output bit for bit as before when false,
 equal the Python twin when true and give the closed forms of a constant-effort step; each
 sigma point is one FMU step, bit for bit the twin's; ukf_fmu equals PaperUKF on the twin bit

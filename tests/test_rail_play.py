@@ -1,4 +1,4 @@
-"""The wheel-rail play's shaping filter (estimators/rail_play.py) against independent
+"""The wheel-rail play's shaping filter (estimators/inertial/rail_play.py) against independent
 computations: its stationary covariance solves the Lyapunov equation, its closed-form
 discretisation is Van Loan's matrix exponential of the continuous model, rest is the identity,
 and bad values are one line."""

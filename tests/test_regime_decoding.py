@@ -1,4 +1,4 @@
-"""The hidden-Markov-model regime recogniser (estimators/regime_decoding.py): Viterbi against
+"""The hidden-Markov-model regime recogniser (estimators/train/regime_decoding.py): Viterbi against
 every path of a short sequence, a hand-made run whose mixed intervals have a known answer,
 the per-estimator recogniser of the study, and its accuracy on FMU runs of seeds that neither
 tuned it (100-199) nor are the study's (1-67)."""

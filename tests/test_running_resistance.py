@@ -1,4 +1,4 @@
-"""The running-resistance UKF of Cunillera et al. (2022) (estimators/running_resistance.py) on a
+"""The running-resistance UKF of Cunillera et al. (2022) (estimators/train/running_resistance.py) on a
 32 km run of the shipped line simulated by the TrainLongitudinal, Driver and GnssReceiver FMUs:
 equal to filterpy's UKF where both are well conditioned, sound at the paper's settings, and
 its process models against closed forms. The improved estimator: its coasting regression

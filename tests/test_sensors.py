@@ -1,4 +1,4 @@
-"""Sensor noise (models/sensors.py, fmus/native/models/SensorNoise.c): the measurement equation, the
+"""Sensor noise (models/sources/sensors.py, fmus/native/models/SensorNoise.c): the measurement equation, the
 statistics of the counter-based noise, its independence from how an importer steps, and the
 FMU's hand-written C equal to the Python twin bit for bit.
 

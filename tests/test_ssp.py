@@ -1,4 +1,4 @@
-"""The SSP reader/writer (fmus/ssp.py) on the example experiment and on small SSDs written here.
+"""The SSP reader/writer (fmus/ssp/) on the example experiment and on small SSDs written here.
 
 Every SSD below uses the two real FMUs (built by the session fixture ``fmu_dir``): sources
 ``resources/<name>.fmu`` that are not in the test folder are found through ``fmu_dirs``.

@@ -1,4 +1,4 @@
-"""The strapdown INS (estimators/strapdown.py, attitude.py, ins_observer.py) on data whose
+"""The strapdown INS (estimators/inertial/strapdown.py, attitude.py, ins_observer.py) on data whose
 answer is known independently of it:
 
 * exact closed-form increments: at rest on the ellipsoid, a constant rotation about a body axis

@@ -1,4 +1,4 @@
-"""Track irregularity source (models/track.py, fmus/native/models/TrackIrregularity.c): the generated
+"""Track irregularity source (models/track/irregularity.py, fmus/native/models/TrackIrregularity.c): the generated
 profiles have the ERRI B176 spectra, the FFT sampler is the cosine sum, the phase stream is
 SplitMix64, and the FMU's hand-written C equals the Python definition."""
 

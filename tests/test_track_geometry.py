@@ -1,4 +1,4 @@
-"""3-D track geometry (models/track_geometry.py): positions against closed forms (circle,
+"""3-D track geometry (models/track/geometry.py): positions against closed forms (circle,
 clothoid by Fresnel integrals, parabolic vertical curve, Bloss transitions and cubic-blended
 vertical curves against adaptive quadrature), continuity of curvature and cant (and of their
 rates, so of the roll, pitch and yaw rates, where the transitions are bloss),

@@ -279,7 +279,7 @@ def test_the_67_run_study(tmp_path, fmu_dir):
     most 60 s on two workers (measured 25 s), and the study's targets on the medians: `improved`
     resistance_rel_error <= 0.05 (measured 0.0043) and speed_rmse_kmh <= 1.0 (0.23);
     max_power_rel_error <= 0.05 (ukf_paper 0.018, improved 0.015). regime_accuracy >= 0.95
-    for `improved`, read by its hidden Markov model over the run (estimators/regime_decoding.py):
+    for `improved`, read by its hidden Markov model over the run (estimators/train/regime_decoding.py):
     measured 0.978; the paper's UKF read by the paper's rules as it comes out, 0.934 (the
     rules on the exact signals sampled every 10 s: 0.947, the mixed intervals of the cruise
     cycles). The paper's UKF: resistance_rel_error 0.050, speed 0.28 km/h; `ukf_fmu` (the FMU

@@ -1,4 +1,4 @@
-"""Trolley FMU (models/trolley.py, fmus/native/models/Trolley.c): C equals the Python twin;
+"""Trolley FMU (models/inertial/trolley.py, fmus/native/models/Trolley.c): C equals the Python twin;
 the ideal IMU increments are right, checked independently (at rest against the Earth rate and
 normal gravity; integrated by python-ins's strapdown integrator against the truth; additive
 over steps); the truth does not depend on the step or the importer's clock; the speed profile,

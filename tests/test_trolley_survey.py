@@ -140,7 +140,7 @@ def _velocity_step(folder: Path, t_jump: float, aware: bool) -> float:
 
 
 def test_an_angular_rate_jump_costs_the_two_sample_ins_a_velocity_step(survey, tmp_path):
-    """Why the shipped track's transitions are bloss (models/track_geometry.py): at 80 m
+    """Why the shipped track's transitions are bloss (models/track/geometry.py): at 80 m
     (t = 101 s) a transition starts. With a linear cant ramp the roll rate jumps there by
     v 0.1 m / (1.5 m 40 m) = 1.67e-3 rad/s; the INS's two-sample coning and sculling take the
     rates as linear over two intervals, so across the jump its sculling term is off by about

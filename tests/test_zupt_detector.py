@@ -1,4 +1,4 @@
-"""The zero-velocity detector (estimators/zupt_detector.py): its statistic against a direct
+"""The zero-velocity detector (estimators/inertial/zupt_detector.py): its statistic against a direct
 per-window sum, its rest distribution, a synthetic rest / motion record with a known answer,
 the scores on hand-made masks, and the detector on a short navigation-grade survey run."""
 

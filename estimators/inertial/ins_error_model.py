@@ -9,7 +9,7 @@ Error state (NED, SI units), ``paper12`` (the paper's eq. 6)::
 
 ``full15``: ``phi, dv, dr`` and the body-frame gyro and accelerometer biases
 ``b_g = (b_gx, b_gy, b_gz)`` (rad/s), ``b_a = (b_ax, b_ay, b_az)`` (m/s2), the biases of the
-``ImuErrors`` FMU (``models/imu_errors.py``). Conventions:
+``ImuErrors`` FMU (``models/inertial/imu_errors.py``). Conventions:
 
 * ``phi`` (rad): the computed attitude is ``C_b^n(computed) = (I - [phi x]) C_b^n(true)`` (the
   psi-angle convention of the paper and of Savage). ``railfmu.estimators.inertial.attitude.perturb``'s rotation

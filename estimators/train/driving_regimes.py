@@ -33,7 +33,7 @@ attribute or SSD setting ``regime_recogniser``, default the paper's).
 
 The truth a recognised regime is compared with
 ----------------------------------------------
-The Driver labels its *modes* (``models/driver.py``); the paper's regimes are what the train
+The Driver labels its *modes* (``models/train/driver.py``); the paper's regimes are what the train
 does. They differ where the driver's traction does not accelerate the train: the departure's
 "accelerate" mode holds just below the 40 km/h limit for over a minute with an effort just
 above the coasting band, and the traction of traction/coast cycles near top speed accelerates

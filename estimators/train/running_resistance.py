@@ -11,7 +11,7 @@ constant: ``Q = 0`` as the paper)::
     z           = (s, v) + w,   R = diag(sigma_s^2, sigma_v^2)          (eq. 6)
 
 ``g(s) = g0 (i(s) / 1000 + w_c(s)) / gamma`` is the line term of the line profile
-(``models/line_profile.py``; the paper takes the track description as exact). The effort
+(``models/track/line_profile.py``; the paper takes the track description as exact). The effort
 ``u`` is not measured: as the paper, it is the effort "needed to match the observed
 acceleration" by eq. 1 with the last estimates. Over the interval ``[t_{k-1}, t_k]`` that
 ends at a fix::
@@ -485,7 +485,7 @@ class ImprovedEstimator(Observer):
     outputs: ClassVar[tuple[str, ...]] = PaperUKF.outputs
     units: ClassVar[dict[str, str]] = PaperUKF.units
     event_driven: ClassVar[bool] = True
-    #: its outputs are read by the hidden Markov model over the run (estimators/regime_decoding.py)
+    #: its outputs are read by the hidden Markov model over the run (estimators/train/regime_decoding.py)
     regime_recogniser: ClassVar[str] = "hmm"
 
     def __init__(self, dt: float, **settings: Any) -> None:

@@ -74,7 +74,7 @@ AFTER_MOTION = (30.0, 60.0)  # s after the start of motion (Jiang et al. (2017):
 ERRORS = ("position", "velocity", "attitude")
 UNITS = {"position": "mm", "velocity": "mm_s", "attitude": "deg"}
 
-# the trolley's track parameters the irregularity figure needs (models/track_geometry.py)
+# the trolley's track parameters the irregularity figure needs (models/track/geometry.py)
 GEOMETRY = ("track_file", "start_latitude", "start_longitude", "start_height", "azimuth", "irregularity_level",
             "irregularity_scale", "irregularity_lines", "lambda_min", "lambda_max", "irregularity_seed",
             "harmonic_lateral_amplitude", "harmonic_vertical_amplitude", "harmonic_wavelength",

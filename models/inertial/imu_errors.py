@@ -79,7 +79,7 @@ convention that 1 unit/√Hz of density is 1 unit·√s of random walk, e.g. 0.0
 
 Counter-based noise, sample index
 ---------------------------------
-All random numbers are the counter-based Gaussians of ``models/sensors.py`` (SplitMix64 +
+All random numbers are the counter-based Gaussians of ``models/sources/sensors.py`` (SplitMix64 +
 Box-Muller, libm ``log``/``cos``): a pure function of (seed, stream, k), so C, the twin and any
 importer give the same numbers and a restored FMU state replays them. Streams (``a`` = 1..6
 for gyro x, y, z, accelerometer x, y, z; above SensorNoise's and GnssReceiver's channels 1..8,
@@ -332,7 +332,7 @@ class ImuErrorsTwin:
 _OUT = {"gyro": "dtheta", "accel": "dv"}
 _BI_UNIT = {"gyro": "deg_h", "accel": "ug"}
 _NOISE_NAME = {"gyro": "arw_deg_sqrt_h", "accel": "noise_ug_sqrt_hz"}
-_SRC_GRADE = "grade .ssv (models/imu_errors.py GRADES); 0: the ideal IMU"
+_SRC_GRADE = "grade .ssv (models/inertial/imu_errors.py GRADES); 0: the ideal IMU"
 
 
 def _sensor_parameters(sensor: str) -> list[Parameter]:

@@ -388,10 +388,10 @@ def check_trolley_parameters(p: Mapping) -> None:
 def build() -> Model:
     deg = math.degrees
     parameters = [
-        Parameter("track_file", "Track element table CSV (models/track_geometry.py): an absolute path or "
+        Parameter("track_file", "Track element table CSV (models/track/geometry.py): an absolute path or "
                   "relative to resources/ (shipped: trolley_track.csv, 600 m, two curves, grades; "
                   "trolley_straight_30m.csv, 30 m straight)",
-                  start="trolley_track.csv", type="String", source="models/track_geometry.py"),
+                  start="trolley_track.csv", type="String", source="models/track/geometry.py"),
         Parameter("start_latitude", f"Latitude of the design start point, the n0 origin "
                   f"({deg(DEFAULT_PLACEMENT['start_latitude']):g} deg)", "rad",
                   DEFAULT_PLACEMENT["start_latitude"], source=f"choice: near Wuhan ({PAPER})"),
@@ -403,7 +403,7 @@ def build() -> Model:
         Parameter("azimuth", "Heading of the first element, clockwise from north (45 deg)", "rad",
                   DEFAULT_PLACEMENT["azimuth"], source=f"{PAPER}, §5: N45°E"),
         Parameter("irregularity_level", "ERRI B176 spectrum of alignment and level: 0 none, 1 low, 2 high",
-                  start=1, type="Integer", source="ERRI B176 (models/track.py)"),
+                  start=1, type="Integer", source="ERRI B176 (models/track/irregularity.py)"),
         Parameter("irregularity_scale", "Factor on the irregularity amplitudes", "", 1.0, source="choice"),
         Parameter("irregularity_lines", "Sinusoids per irregularity channel (log-spaced wavelengths)",
                   start=32, type="Integer", source="choice: a few µs per step"),
@@ -422,7 +422,7 @@ def build() -> Model:
         Parameter("irregularity_file", "Measured alignment/level table added to the spectrum: CSV "
                   "s,alignment,vertical_left,vertical_right (m; as TrackIrregularity's profile_file), "
                   "covering the track; absolute or relative to resources/; none when empty",
-                  start="", type="String", source="models/track_geometry.py"),
+                  start="", type="String", source="models/track/geometry.py"),
         Parameter("wobble_lateral", "Lateral wobble of the body off the rail (wheel-rail play)", "m", 0.0,
                   source="choice: 0 keeps the non-holonomic constraint exact"),
         Parameter("wobble_vertical", "Vertical wobble of the body off the rail", "m", 0.0, source="choice"),

@@ -45,7 +45,7 @@ At ``t0`` (``h = 0``) ``k`` is 0. The noise at a communication point is therefor
 whatever the step sizes that led there, except for an instant within that band.
 
 Inputs, outputs, sigma and bias carry no unit: the FMU is generic and connects to any Real
-output (a unit-less connector is never converted by the SSP reader, ``fmus/ssp_units.py``);
+output (a unit-less connector is never converted by the SSP reader, ``fmus/ssp/units.py``);
 ``sigma_i`` and ``bias_i`` are in the unit of what channel ``i`` carries, say which in the
 ``.ssv`` that sets them.
 

@@ -114,7 +114,7 @@ then the N level phases. Few lines keep the FMU's step cheap; the variance is th
 sum of the spectrum over the band.
 
 A **measured table** (``irregularity_file``, added to the above) has the format of the
-``TrackIrregularity`` FMU's ``profile_file`` (``models/track.py``): header
+``TrackIrregularity`` FMU's ``profile_file`` (``models/track/irregularity.py``): header
 ``s,alignment,vertical_left,vertical_right`` (m, ``s`` strictly increasing), interpolated by
 the same cubic Hermite splines with Catmull-Rom slopes; ``y`` is its alignment and ``z`` the
 vertical profile ``(vertical_left + vertical_right) / 2``, signs as ``y`` and ``z`` here

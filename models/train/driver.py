@@ -101,7 +101,7 @@ def build() -> Model:
                   source="this project's choice (a measured run's fixes go on at the platform)", min=0.0),
         Parameter("line_file", "Line profile CSV (as TrainLongitudinal's): an absolute path or "
                   "relative to resources/ (line.csv is shipped)", start="line.csv", type="String",
-                  source="models/line_profile.py"),
+                  source="models/track/line_profile.py"),
     ]
     inputs = [Input("s", "Train position", "m", 0.0), Input("v", "Train speed", "m/s", 0.0),
               Input("speed_limit", "Line speed limit at s", "m/s", 40.0 * KMH)]
@@ -111,7 +111,7 @@ def build() -> Model:
         Output("command", "Traction/brake command to the train, -1..1", "", depends_on=decided),
         Output("regime", "True driving regime: 0 standstill, 1 traction, 2 cruising, 3 coasting, "
                "4 braking", type="Integer", depends_on=decided),
-        Output("mode", "Driver mode 0-8 (models/driver.py)", type="Integer", depends_on=decided),
+        Output("mode", "Driver mode 0-8 (models/train/driver.py)", type="Integer", depends_on=decided),
         Output("mode_before", "Mode at the previous communication point (memory)", type="Integer", depends_on=()),
         Output("decision_time", "Communication point at which mode was decided (memory)", "s", depends_on=()),
         Output("cruise_target", "Style: cruise target v_c", "m/s", depends_on=()),

@@ -4,7 +4,7 @@ the UKF's position noise 4 m, §4.2).
 
 Measurement equation, with ``t0`` the start time, ``T = sample_period``, ``h`` the
 communication step that ended at ``t`` (0 in initialisation mode) and ``eps`` =
-``STEP_TOLERANCE`` = 0.01 (the sample index of ``models/sensors.py``)::
+``STEP_TOLERANCE`` = 0.01 (the sample index of ``models/sources/sensors.py``)::
 
     k(t)      = max(floor((t - t0) / T + eps min(h / T, 1)), 0)
     valid     = h = 0  or  k(t) > k(t - h)       a new sample instant reached at this point

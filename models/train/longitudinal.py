@@ -17,7 +17,7 @@ the maximum deceleration ``b_max``, 0 coasting. ``r0, r1, r2`` are inputs, so an
 component (a StepSource, a SignalTable) can make them drift or step during a run; their
 start values are the vehicle's Davis coefficients below divided by ``gamma m`` (the paper's
 mass-specific form, f = F / (gamma m)). ``i(s)`` and the speed limit come from the line
-profile (``models/line_profile.py``: the CSV and its look-up). An RK4 step that brakes
+profile (``models/track/line_profile.py``: the CSV and its look-up). An RK4 step that brakes
 through ``v = 0`` ends slightly below it; the FMU then sets ``v = 0`` at the communication
 point (the train does not roll back on its brakes).
 
@@ -103,7 +103,7 @@ def build() -> Model:
                   MAX_DECELERATION, source="service brake: assumption", positive=True),
         Parameter("line_file", "Line profile CSV position_m,gradient_permille,speed_limit_kmh: an "
                   "absolute path or relative to resources/ (line.csv is shipped)", start="line.csv",
-                  type="String", source="models/line_profile.py"),
+                  type="String", source="models/track/line_profile.py"),
     ]
     inputs = [
         Input("command", "Traction/brake command: +1 full traction, 0 coast, -1 maximum brake",

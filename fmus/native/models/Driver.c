@@ -1,5 +1,5 @@
 /* Driver: manual driving of one interstation run as Cunillera et al. (2022) §4 describes it
- * (models/driver.py states the rules, the modes and the style draw, and is this code's Python
+ * (models/train/driver.py states the rules, the modes and the style draw, and is this code's Python
  * twin; tests/test_driver.py proves them equal).
  *
  * The memory of the driver is in its outputs (so fmi2GetFMUstate saves it): `mode` decided

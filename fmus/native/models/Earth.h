@@ -1,6 +1,6 @@
 /* Earth: WGS-84, Earth rate and Somigliana normal gravity, the C mirror of models/earth.py
  * (same constants and formulas, those of python-ins; tests/test_trolley.py compares them),
- * plus ECEF -> geodetic (models/track_geometry.py ecef_to_lla, the same iteration).
+ * plus ECEF -> geodetic (models/track/geometry.py ecef_to_lla, the same iteration).
  * Angles in radians, lengths in metres. Header-only (static functions).
  */
 #ifndef RAILFMU_EARTH_H

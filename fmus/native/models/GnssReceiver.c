@@ -1,4 +1,4 @@
-/* GnssReceiver: position and speed fixes every sample_period (models/gnss.py states the
+/* GnssReceiver: position and speed fixes every sample_period (models/train/gnss.py states the
  * measurement equation and is this code's Python twin; tests/test_gnss.py proves them equal).
  * Stateless: every output is a function of the time, the step that reached it and the inputs,
  * so a get after a set, a restored FMU state or any importer give the same fixes.

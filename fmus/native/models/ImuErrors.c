@@ -1,4 +1,4 @@
-/* ImuErrors: measured IMU increments from ideal ones (models/imu_errors.py states the error
+/* ImuErrors: measured IMU increments from ideal ones (models/inertial/imu_errors.py states the error
  * model, the exact Gauss-Markov discretisation and the noise streams, and is this code's Python
  * twin; tests/test_imu_errors.py proves them equal bit for bit).
  *

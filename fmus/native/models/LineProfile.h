@@ -1,5 +1,5 @@
 /* LineProfile: a line's gradient and speed limit by position, read from a CSV
- * (models/line_profile.py states the format and semantics and is this code's Python twin):
+ * (models/track/line_profile.py states the format and semantics and is this code's Python twin):
  *
  *     position_m,gradient_permille,speed_limit_kmh
  *     0,0.0,40

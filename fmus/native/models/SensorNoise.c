@@ -1,4 +1,4 @@
-/* railfmu: SensorNoise, hand-written model code (the equations are in models/sensors.py,
+/* railfmu: SensorNoise, hand-written model code (the equations are in models/sources/sensors.py,
  * whose docstring is this model's documentation; tests/test_sensors.py proves this C equals
  * the Python bit for bit).
  *

@@ -1,4 +1,4 @@
-/* SignalTable: replay of a time-indexed CSV table (models/signal_table.py states the
+/* SignalTable: replay of a time-indexed CSV table (models/sources/signal_table.py states the
  * semantics; tests/test_signal_table.py proves this code equals its Python twin there).
  *
  * The file is read once in model_initialize: only the bound columns are kept, one row of

@@ -1,5 +1,5 @@
 /* TrackGeometry: 3-D design alignment on WGS-84 with alignment/level irregularities and a
- * body wobble, the C mirror of models/track_geometry.py (which states the element table,
+ * body wobble, the C mirror of models/track/geometry.py (which states the element table,
  * the frames and the equations; tests/test_trolley.py proves the two equal).
  * Included (static) by Trolley.c.
  */
@@ -235,7 +235,7 @@ fail:
 
 static size_t tg_find(const double *x, size_t n, double s);
 
-/* The measured table (models/track_geometry.py: the TrackIrregularity profile_file format);
+/* The measured table (models/track/geometry.py: the TrackIrregularity profile_file format);
    after tg_read (it must cover 0..length). 1 after one model_error. */
 static int tg_read_table(ModelInstance *m, TrackGeom *g, const char *file) {
     const ProfileTable *p = &g->table;
@@ -286,7 +286,7 @@ typedef struct {
     double chi, k, dk, g, dg, c, dc;
 } TgAngles;
 
-/* the shapes of models/track_geometry.py, in the same arithmetic */
+/* the shapes of models/track/geometry.py, in the same arithmetic */
 static void tg_angles(const TrackGeom *G, double s, TgAngles *a) {
     const size_t i = tg_find(G->hs, G->nh, s), j = tg_find(G->vs, G->nv, s);
     const double L = G->hs[i + 1] - G->hs[i], u = s - G->hs[i], Lv = G->vs[j + 1] - G->vs[j];
@@ -434,7 +434,7 @@ static void tg_point(const TrackGeom *G, double s, int position, TrackPoint *P) 
 
 /* ---- setup -------------------------------------------------------------------------------- */
 
-/* ERRI B176 (models/track.py): A Oc^2 / ((O^2 + Or^2)(O^2 + Oc^2)) */
+/* ERRI B176 (models/track/irregularity.py): A Oc^2 / ((O^2 + Or^2)(O^2 + Oc^2)) */
 static double tg_psd(double A, double omega) {
     const double oc = ERRI_OMEGA_C, orr = ERRI_OMEGA_R, o2 = omega * omega;
     return A * oc * oc / ((o2 + orr * orr) * (o2 + oc * oc));

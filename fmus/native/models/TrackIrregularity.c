@@ -1,4 +1,4 @@
-/* railfmu: TrackIrregularity, hand-written model code (the equations are in models/track.py,
+/* railfmu: TrackIrregularity, hand-written model code (the equations are in models/track/irregularity.py,
  * whose docstring is this model's documentation; tests/test_track.py proves this C equals
  * the Python).
  *
@@ -57,7 +57,7 @@ typedef struct {
     ProfileTable profile; /* measured; n == 0 when none */
 } TrackData;
 
-/* ---- spectra (same operation order as models/track.py) ---- */
+/* ---- spectra (same operation order as models/track/irregularity.py) ---- */
 static double psd_shape(double o2) {
     return ERRI_OMEGA_C * ERRI_OMEGA_C / ((o2 + ERRI_OMEGA_R * ERRI_OMEGA_R) * (o2 + ERRI_OMEGA_C * ERRI_OMEGA_C));
 }

@@ -1,5 +1,5 @@
 /* TrainLongitudinal: the train motion model of Cunillera et al. (2022), eqs. 1-2, with the
- * gradient from a line profile CSV (models/train_longitudinal.py states the equations and is
+ * gradient from a line profile CSV (models/train/longitudinal.py states the equations and is
  * this code's Python twin; tests/test_train.py proves them equal).
  */
 #include <math.h>

@@ -1,7 +1,7 @@
 /* Trolley: a survey trolley pushed along a 3-D track (Jiang et al. 2017) and its ideal IMU
- * increments. models/trolley.py states the speed profile, the kinematics, the quadrature
+ * increments. models/inertial/trolley.py states the speed profile, the kinematics, the quadrature
  * and the outputs, and is this code's Python twin (tests/test_trolley.py proves them equal);
- * the track is TrackGeometry.h (models/track_geometry.py), the Earth Earth.h
+ * the track is TrackGeometry.h (models/track/geometry.py), the Earth Earth.h
  * (models/earth.py).
  *
  * Memory in outputs (so fmi2GetFMUstate keeps it): interval_start, the previous
@@ -17,7 +17,7 @@
 #include "model.h"
 
 enum { REST, ACCELERATE, CRUISE, BRAKE };
-#define MAX_PANEL 0.01 /* s: models/trolley.py MAX_PANEL */
+#define MAX_PANEL 0.01 /* s: models/inertial/trolley.py MAX_PANEL */
 /* 3-point Gauss-Legendre on [-1, 1]: nodes 0, +-sqrt(3/5), weights 8/9, 5/9 */
 static const double GL3_X = 0.7745966692414834, GL3_W0 = 0.8888888888888888, GL3_W1 = 0.5555555555555556;
 

@@ -1,5 +1,5 @@
 /* railfmu: contract between the shared FMI 2.0 Co-Simulation runtime (fmi2_runtime.c) and
- * one model's code (generated from models/ by fmus/codegen.py, or hand-written with a test
+ * one model's code (generated from models/ by fmus/generate/codegen.py, or hand-written with a test
  * that proves it equals the Python definition).
  *
  * Every variable lives in one array per FMI type, indexed by its value reference
