@@ -34,7 +34,7 @@ def run(tmp_path, variant, *extra):
 
 
 def test_reduced_standard_run(tmp_path):
-    """10 s (200 m) of the standard condition: every metric the issue names, rank 7, the filter
+    """10 s (200 m) of the standard condition: every metric the study reports, rank 7, the filter
     within loose bounds of the paper's J_rel, the smoother better than the filter in every band
     (measured on 200 m: filter 0.13, 0.19, 0.12, 0.15; smoother 0.06, 0.11, 0.04, 0.04)."""
     m, out = run(tmp_path, "standard", "--stop-time", "10")

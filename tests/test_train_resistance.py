@@ -296,7 +296,7 @@ def test_the_67_run_study(tmp_path, fmu_dir):
     assert p50["ukf_paper.max_power_rel_error"] <= 0.05 and p50["improved.max_power_rel_error"] <= 0.05
     assert p50["ukf_paper.regime_accuracy"] >= 0.92 and p50["improved.regime_accuracy"] >= 0.95
     assert abs(p50["ukf_fmu.resistance_rel_error"] - p50["ukf_paper.resistance_rel_error"]) < 1e-4
-    # the 60 s of the issue is a speed goal, measured by the command and reported, not asserted
+    # the 60 s is a speed goal, measured by the command and reported, not asserted
     # here (a loaded machine is not a slow implementation)
     print(f"railfmu study train_resistance --variant standard --runs 67: {wall:.1f} s wall")
 

@@ -44,7 +44,7 @@ ROOT = Path(__file__).resolve().parents[1]
 EXP = ROOT / "experiments" / "trolley_survey"
 REPLAY = ROOT / "experiments" / "trolley_imu_replay"
 FAST = 120.0  # s: 10 s rest, the first run to the stop at 60 m, into the second (the clothoid at 80 m)
-BAR_M, BAR_RAD = 0.01e-3, 1e-6  # the issue's bar: 0.01 mm, 1e-6 rad
+BAR_M, BAR_RAD = 0.01e-3, 1e-6  # the ideal IMU's bar: 0.01 mm, 1e-6 rad
 DEG = math.pi / 180
 
 
@@ -429,7 +429,7 @@ def test_whole_run(tmp_path, fmu_dir):
     """The whole 600 m, 700 s ideal-IMU run at 5, 2.5 and 10 ms on the shipped track (bloss
     transitions and vertical curves: the angular rates are continuous everywhere). Measured:
     position 0.00135, 0.00034 and 0.0054 mm (second order in the step), attitude 5.6e-13,
-    1.4e-13 and 2.2e-12 rad, velocity 1.5e-9, 3.6e-10 and 6.5e-9 m/s: the issue's bar at all
+    1.4e-13 and 2.2e-12 rad, velocity 1.5e-9, 3.6e-10 and 6.5e-9 m/s: the ideal IMU's bar at all
     three steps. With linear transitions (``test_an_angular_rate_jump_...``) the same runs
     gave 0.0386, 0.00966 and 0.154 mm, from the eight angular-rate jumps met in motion
     (3.4e-8 m/s at each cant-ramp end of the 400 m curve at 5 ms, 2.0e-8 at the 600 m
@@ -633,7 +633,7 @@ def reduced_monte_carlo(tmp_path_factory, fmu_dir):
 
 def test_reduced_monte_carlo_agrees_with_its_prediction(reduced_monte_carlo):
     """20 runs: the mean of the per-run predictions within 30 % of the RMS over runs of the
-    max chord errors (the issue's 15 % at 500 runs; 20 runs leave ~12 % sampling error on an
+    max chord errors (the study's 15 % at 500 runs; 20 runs leave ~12 % sampling error on an
     RMS of a max, std(M^2) / mean(M^2) ~ 1.3), and the Monte Carlo's peak RMS (the paper's
     statistic) within 30 % of the predicted peak pointwise sigma and of the paper's 0.99 / 0.70
     mm: an RMS over 20 runs at one point has a relative standard error of 1 / sqrt(40) = 16 %
