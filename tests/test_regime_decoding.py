@@ -139,7 +139,7 @@ def test_each_observer_names_its_recogniser(fmu_dir):
 
     exp = find_experiment("train_resistance")
     system = load_system(exp, "standard")
-    assert regime_recognisers(system) == {"ukf_paper": "paper", "improved": "hmm", "ukf_fmu": "paper"}
+    assert regime_recognisers(system) == {"ukf_paper": "paper", "improved": "hmm", "ukf_fmu": "paper", "em": "hmm"}
     spec = next(o for o in system.observers if o.name == "ukf_paper")
     spec.settings["regime_recogniser"] = "hmm"
     assert regime_recognisers(system)["ukf_paper"] == "hmm"
