@@ -37,7 +37,8 @@ def _signature(system):
 
 @pytest.mark.parametrize("experiment,variant", CASES)
 def test_connection_units_agree_in_the_archive(fmu_dir, tmp_path, experiment, variant):
-    ssp, system = export_system(experiment, tmp_path / "x.ssp", variant, stop_time=2.0)
+    # 20 s: the measured log's rows are 10 s apart, and its replay steps at them
+    ssp, system = export_system(experiment, tmp_path / "x.ssp", variant, stop_time=20.0)
     out = tmp_path / "x"
     with zipfile.ZipFile(ssp) as zf:
         zf.extractall(out)

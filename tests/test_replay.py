@@ -130,10 +130,11 @@ def test_exported_ssp_carries_the_table_and_runs_to_the_same_estimates(shipped_r
     res = railfmu("export", "alignment_replay", "-o", str(ssp))
     assert res.returncode == 0, res.stderr
     with zipfile.ZipFile(ssp) as zf:
-        assert sorted(zf.namelist()) == ["SystemStructure.ssd", "resources/SignalTable.fmu"]
+        # the replay's own copy of the SignalTable FMU, with its connectors' units declared
+        assert sorted(zf.namelist()) == ["SystemStructure.ssd", "resources/replay_SignalTable.fmu"]
         ssd = zf.read("SystemStructure.ssd").decode()
     built = fmu_resources_of(fmu_dir / "SignalTable.fmu")
-    assert fmu_resources(ssp, "resources/SignalTable.fmu") == {**built, "axlebox_run.csv": TABLE.read_bytes()}
+    assert fmu_resources(ssp, "resources/replay_SignalTable.fmu") == {**built, "axlebox_run.csv": TABLE.read_bytes()}
     assert '<ssv:String value="axlebox_run.csv"/>' in ssd and str(EXP) not in ssd
     assert railfmu("validate", str(ssp)).returncode == 0
     res = railfmu("run", str(ssp), "--out", str(tmp_path / "run"), cwd=tmp_path)
@@ -158,7 +159,7 @@ def test_a_table_named_on_the_command_line_is_bundled_by_export(simulated, tmp_p
     system = read_system(EXP, variant="measured", fmu_dirs=[fmu_dir], overrides={"replay": {"file": str(mine)}})
     ssp = write_ssp(system, tmp_path / "mine.ssp")
     shutil.rmtree(mine.parent)
-    assert fmu_resources(ssp, "resources/SignalTable.fmu")["monday run.csv"] == table.read_bytes()
+    assert fmu_resources(ssp, "resources/replay_SignalTable.fmu")["monday run.csv"] == table.read_bytes()
     back = read_system(ssp)
     assert back.component("replay").parameters["file"] == "monday run.csv"
     bank = ObserverBank(back, tmp_path / "estimates.csv")

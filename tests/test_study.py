@@ -68,7 +68,7 @@ def test_roles_are_bound_from_the_ssd(fmu_dir):
     roles = suspension_fault.STUDY.bind(system)
     assert roles == {"k1": "fault.y", "k1_before": 430e3, "k1_after": 215e3, "fault_time": 20.0}
     system = read_system(EXPERIMENTS / "lateral_alignment", variant="standard", fmu_dirs=[fmu_dir],
-                         overrides={"track": {"V": "25"}})
+                         overrides={"run": {"V": "25"}})
     roles = lateral_alignment.STUDY.bind(system)
     assert (roles["ddy"], roles["dpsi"], roles["ddy_f"]) == ("sensors.y_1", "sensors.y_2", "sensors.y_3")
     assert roles["alignment"] == "track.alignment_1" and roles["position"] == "track.position"

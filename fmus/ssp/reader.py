@@ -505,9 +505,23 @@ class _Reader:
         if name in self.files and self.files[name][0] == str(path.resolve()):  # a second target of one name
             return self.files[name][0]
         if not path.is_file():
+            if self._fmu_resource(name, value):  # a table the FMU ships (a shipped track by name)
+                return value
             raise UserError(f"{where}: {value}: no such file ({path}{'' if Path(value).is_absolute() else ', relative to the current directory'})")
         self.files[name] = (str(path.resolve()), how)
         return str(path.resolve())
+
+    def _fmu_resource(self, name: str, value: str) -> bool:
+        """Whether ``value``, a bare file name, is in the ``resources/`` of the FMU of the
+        component that ``name`` (``component.parameter``) sets: the FMU finds it there."""
+        comp = self.comps.get(name.rpartition(".")[0])
+        if comp is None or "/" in value or "\\" in value:
+            return False
+        try:
+            with zipfile.ZipFile(comp.fmu) as zf:
+                return f"resources/{value}" in zf.namelist()
+        except (OSError, zipfile.BadZipFile):
+            return (Path(comp.fmu) / "resources" / value).is_file()
 
     def _resource(self, var, value, where: str, name: str = ""):
         """A String parameter whose value is a relative path under ``resources/`` names a
