@@ -135,7 +135,7 @@ def cmd_study(args) -> int:
     from railfmu.experiments.engine.api import study
 
     study(args.experiment, args.variant, out=args.out, scheduler=args.scheduler, master=args.master,
-          workers=args.workers, runs=args.runs, keep_runs=args.keep_runs,
+          workers=args.workers, runs=args.runs, keep_runs=args.keep_runs, resume=args.resume,
           log=_log(args) or _Quiet(), **_overrides(args))
     return 0
 
@@ -263,6 +263,9 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--keep-runs", action="store_true",
                    help="with --runs N > 1: keep each run's CSVs, plots and report (default: metrics only)")
     p.add_argument("--out", help="output folder (default out/EXP_study)")
+    p.add_argument("--resume", action="store_true",
+                   help="keep the runs a killed or finished study into --out finished (out/runs) and "
+                        "run only the missing ones")
     p.add_argument("--scheduler", help="address of a running Dask scheduler (default: a local cluster)")
     p.add_argument("--workers", type=int, help="local cluster size (default: min(runs in all, 2))")
     p.add_argument("--master", default=None, help=MASTER_HELP)

@@ -23,6 +23,7 @@ from typing import TextIO
 from railfmu.estimators.track.metrics import rms
 from railfmu.models.errors import UserError
 
+from railfmu.experiments.engine.files import ensure_folder
 from railfmu.experiments.engine.result import Run, json_default as _json_default
 from railfmu.experiments.engine.studies import HERE, Experiment, experiment_names, study_named, study_names
 from railfmu.experiments.engine.study_protocol import RunData, Study
@@ -129,7 +130,7 @@ def execute(name: str | Path, variant: str | None = None, out: Path | str | None
     master = master or system.master or DEFAULT_MASTER
     roles = exp.study.bind(system)
     if out is not None:
-        out.mkdir(parents=True, exist_ok=True)
+        ensure_folder(out)
     for w in system.warnings:
         warn(f"railfmu: warning: {w}")
     until = f" (to {system.stop_time:g} s from {system.stop_time_from})" if system.stop_time_from != "ssd:DefaultExperiment" else ""
