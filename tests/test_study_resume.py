@@ -74,7 +74,7 @@ def test_resume_refuses_runs_made_with_other_settings(tmp_path):
     out = tmp_path / "s"
     small = ["study", "track_wheelset", "--variant", "psd", "--runs", "2", "--stop-time", "0.2", "--out", str(out)]
     assert railfmu(*small).returncode == 0
-    res = railfmu(*small, "--resume", "--set", "track.psd_level=3")
+    res = railfmu(*small, "--resume", "--set", "track.psd_scale=0.5")
     assert res.returncode == 2 and len(res.stderr.strip().splitlines()) == 1, res.stderr
     assert "--resume" in res.stderr and "overrides" in res.stderr
     # more seeds with the same settings: only the new ones run

@@ -32,7 +32,10 @@ from railfmu.models.errors import UserError  # noqa: E402
 def cmd_build(args) -> int:
     from railfmu.fmus.generate.build import build_all, validate
 
+    from railfmu.experiments.engine.files import ensure_folder
+
     t0 = time.monotonic()
+    ensure_folder(args.out)
     paths = build_all(args.out, force=args.force)
     for p in paths:
         problems = validate(p)
@@ -144,7 +147,10 @@ def cmd_export(args) -> int:
     from railfmu.experiments.engine.api import export_system
     from railfmu.experiments.engine.runner import find_experiment
 
+    from railfmu.experiments.engine.files import ensure_folder
+
     exp = find_experiment(args.experiment)
+    ensure_folder(Path(args.output).absolute().parent, f"-o {args.output}: its folder")
     out, system = export_system(args.experiment, args.output, args.variant, **_overrides(args))
     print(f"wrote {out} ({exp.name}/{args.variant or exp.default_variant}, "
           f"{len(system.components)} FMUs inside)")

@@ -1,7 +1,8 @@
-"""Output files that survive a kill and folders that fail in one line."""
+"""Output files that survive a kill, folders that fail in one line, and the range of seeds."""
 
 from __future__ import annotations
 
+import math
 import os
 from pathlib import Path
 
@@ -37,3 +38,19 @@ def ensure_folder(folder: Path | str, what: str = "--out") -> Path:
     if not os.access(folder, os.W_OK | os.X_OK):
         raise UserError(f"{what} {folder}: the folder is not writable")
     return folder
+
+
+SEED_MAX = 2**31 - 1  # a seed is an FMU Integer parameter (a C int): larger ones would wrap
+
+
+def check_seed(seed, what: str = "--seed") -> None:
+    if seed is None:
+        return
+    if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed <= SEED_MAX:
+        raise UserError(f"{what} {seed!r}: must be an integer from 0 to {SEED_MAX}")
+
+
+def check_times(stop_time: float | None, step_size: float | None) -> None:
+    for flag, value in (("--stop-time", stop_time), ("--step-size", step_size)):
+        if value is not None and not (value > 0 and math.isfinite(value)):
+            raise UserError(f"{flag} {value:g}: must be a positive number of seconds")

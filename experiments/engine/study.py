@@ -36,10 +36,12 @@ import numpy as np
 from railfmu.estimators.track.metrics import rms
 from railfmu.models.errors import UserError
 
-from railfmu.experiments.engine.files import ensure_folder, write_atomic
+from railfmu.experiments.engine.files import check_seed, check_times, ensure_folder, write_atomic
 from railfmu.experiments.engine.runner import _json_default, find_experiment, run_experiment
 
 DEFAULT_FIRST_SEED = 1
+MAX_RUNS = 1_000_000  # seeds and futures are held in memory: 10**12 runs would be killed by the OOM killer
+MAX_WORKERS = 1024  # worker processes of a local cluster
 # the run's inputs, echoed in its metrics: not summarised
 INPUT_KEYS = {"parameters", "observer_settings", "roles", "seed", "start_time_s", "stop_time_s", "step_size_s",
               "simulated_seconds"}
@@ -81,8 +83,15 @@ def _run_member(name: str, variant: str, out: str | None, master: str | None, ov
     """Worker task: one run, output captured (workers have no terminal); ``out`` None writes
     nothing; ``series``: the metrics carry the study's per-run arrays (Monte Carlo figures)."""
     log = io.StringIO()
-    return run_experiment(name, variant, out, master=master, progress=False, log=log,
-                          write_files=out is not None, series=series, **overrides)
+    try:
+        return run_experiment(name, variant, out, master=master, progress=False, log=log,
+                              write_files=out is not None, series=series, **overrides)
+    except UserError as exc:  # a value, not raised: Dask would log the worker's traceback
+        return _MemberError(str(exc))
+
+
+class _MemberError(str):
+    """A member's one-line user error, handed back from the worker."""
 
 
 RUNS_DIR = "runs"
@@ -156,14 +165,17 @@ def run_study(name: str, out: Path | str | None = None, scheduler: str | None = 
     unknown = [v for v in variants or [] if v not in exp.variants]
     if unknown:
         raise UserError(f"experiment {exp.name}: unknown variant {unknown[0]!r}; known: {', '.join(exp.variants)}")
-    if runs < 1:
-        raise UserError(f"--runs {runs}: must be at least 1")
+    if not 1 <= runs <= MAX_RUNS:
+        raise UserError(f"--runs {runs}: must be from 1 to {MAX_RUNS:,}")
     selected = list(dict.fromkeys(variants)) if variants else exp.variants
     monte_carlo = runs > 1
     first = seed if seed is not None else DEFAULT_FIRST_SEED
     seeds = [first + i for i in range(runs)] if monte_carlo else [seed]
-    if workers is not None and workers < 1:
-        raise UserError(f"--workers {workers}: must be at least 1")
+    if workers is not None and not 1 <= workers <= MAX_WORKERS:
+        raise UserError(f"--workers {workers}: must be from 1 to {MAX_WORKERS}")
+    check_seed(first)
+    check_times(overrides.get("stop_time"), overrides.get("step_size"))
+    check_seed(first + runs - 1, f"--seed {first} with --runs {runs}: the last seed")
     out = Path(out or Path("out") / f"{exp.name}_study")
     ensure_folder(out)
     build_all(default_out())  # once, before workers would race to build the same FMUs
@@ -195,7 +207,7 @@ def run_study(name: str, out: Path | str | None = None, scheduler: str | None = 
             except (OSError, TimeoutError) as exc:
                 raise UserError(f"--scheduler {scheduler}: cannot connect ({exc})") from None
         elif todo:
-            cluster = LocalCluster(n_workers=workers or min(len(todo), 2), threads_per_worker=1, processes=True,
+            cluster = LocalCluster(n_workers=min(workers or 2, len(todo)), threads_per_worker=1, processes=True,
                                    dashboard_address=None, silence_logs=40)
             client = Client(cluster)
         if todo:
@@ -207,10 +219,10 @@ def run_study(name: str, out: Path | str | None = None, scheduler: str | None = 
                        for v, s in todo}
             for i, fut in enumerate(as_completed(futures), len(stored) + 1):
                 v, s = futures[fut]
-                try:
-                    text, *results[v, s] = _canonical(fut.result())
-                except UserError as exc:
-                    raise UserError(f"variant {v}{f' seed {s}' if monte_carlo else ''}: {exc}") from None
+                result = fut.result()
+                if isinstance(result, _MemberError):
+                    raise UserError(f"variant {v}{f' seed {s}' if monte_carlo else ''}: {result}")
+                text, *results[v, s] = _canonical(result)
                 path = _run_file(runs_dir, v, s)
                 path.parent.mkdir(parents=True, exist_ok=True)
                 write_atomic(path, text)  # as it finishes: a killed study keeps it
