@@ -347,9 +347,9 @@ def test_fmi2_error_in_a_run_names_component_and_status_and_cites_no_unwritten_f
     res = railfmu("run", str(ssd), "--master", "container", "--out", str(out), "--set", "b.error_time=2")
     _assert_one_line_error(res, "stair.fmu (b): fmi2DoStep at t = 2 s failed: fmi2Error")
     assert "partial results: " in res.stderr and "9 rows up to t = 2 s" in res.stderr
-    # a refusal before the first row: no file to cite
-    res = railfmu("run", "track_wheelset", "--set", "track.psd_level=7", "--out", str(out))
-    _assert_one_line_error(res, "psd_level = 7")
+    # a refusal before the first row: no file to cite (m declares no min: the FMU refuses it)
+    res = railfmu("run", "track_wheelset", "--set", "wheelset.m=-1", "--out", str(out))
+    _assert_one_line_error(res, "parameter m = -1 must be > 0")
     assert "partial results" not in res.stderr
 
 
