@@ -5,7 +5,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 OUT ?= out
 
-.PHONY: setup build run test test-slow test-latest lint-imports lock bench clean
+.PHONY: setup build run test test-slow test-latest lint-imports lock bench clean sanitize
 
 $(BIN)/railfmu: pyproject.toml requirements.lock
 	$(PYTHON) -m venv $(VENV)
@@ -32,6 +32,21 @@ test: lint-imports
 
 test-slow: setup
 	$(BIN)/python -m pytest -q -m slow
+
+# Every FMU built with ASan + UBSan into its own cache (never mixed with the normal build), then
+# the FMU state fuzz (seeded, bounded: FUZZ_SEED, FUZZ_CASES) and the FMU tests run against
+# them; any out-of-bounds access or undefined behaviour aborts the run. Python itself is not
+# instrumented, so the runtime is preloaded and leak checks are off (CPython's own allocations).
+SANITIZE_CACHE ?= build/sanitize
+FUZZ_SEED ?= 0
+FUZZ_CASES ?= 60
+sanitize: setup
+	RAILFMU_CACHE=$(abspath $(SANITIZE_CACHE)) \
+	RAILFMU_EXTRA_CFLAGS="-fsanitize=address,undefined -fno-sanitize-recover=all -fno-omit-frame-pointer" \
+	LD_PRELOAD="$$(gcc -print-file-name=libasan.so) $$(gcc -print-file-name=libubsan.so)" \
+	ASAN_OPTIONS=detect_leaks=0:abort_on_error=1 UBSAN_OPTIONS=print_stacktrace=1 \
+	RAILFMU_FUZZ_SEED=$(FUZZ_SEED) RAILFMU_FUZZ_CASES=$(FUZZ_CASES) \
+	$(BIN)/python -m pytest -q -p no:cacheprovider tests/test_fmu_state.py tests/test_runtime_c.py tests/test_fmus.py
 
 # The newest releases of every dependency instead of the lock: how the next refresh would fare.
 test-latest:

@@ -3,6 +3,7 @@ with exit code 2 for every kind of bad input (docs/architecture.md, "Command lin
 
 import csv
 import json
+import os
 import shutil
 import subprocess
 import sys
@@ -143,6 +144,78 @@ def test_bad_command_line_is_one_line_and_exit_2(tmp_path, args, message):
     _assert_one_line_error(res, message)
 
 
+_RUN = ["run", "track_wheelset", "--stop-time", "0.2"]
+_STUDY = ["study", "track_wheelset", "--variant", "psd", "--stop-time", "0.2"]
+
+
+@pytest.mark.parametrize("args, message", [
+    (["run", "track_wheelset", "--stop-time", "1e300"], "more than the 1,099,511,627,776 a run can take"),
+    (["run", "track_wheelset", "--stop-time", "1e9"], "GiB, more than this machine's"),
+    (["run", "track_wheelset", "--stop-time", "inf"], "--stop-time inf: must be a positive"),
+    (["run", "track_wheelset", "--stop-time", "-1"], "--stop-time -1: must be a positive"),
+    (["run", "track_wheelset", "--stop-time", "soon"], "invalid float value"),
+    (["run", "track_wheelset", "--step-size", "0"], "--step-size 0: must be a positive"),
+    (["run", "track_wheelset", "--step-size", "-1e-3"], "--step-size: expected one argument"),
+    (["run", "track_wheelset", "--step-size=-1e-3"], "--step-size -0.001: must be a positive"),
+    ([*_STUDY, "--set", "wheelset.m=-1"], "variant psd: WheelsetLateral.fmu (wheelset): fmi2ExitInitializationMode"),
+    (["run", "track_wheelset", "--step-size", "inf"], "--step-size inf: must be a positive"),
+    (["run", "track_wheelset", "--stop-time", "1", "--step-size", "1e-300"], "more than the"),
+    ([*_RUN, "--seed", "-1"], "--seed -1: must be an integer from 0 to 2147483647"),
+    ([*_RUN, "--seed", str(2**40)], f"--seed {2**40}: must be an integer from 0"),
+    ([*_RUN, "--set", "track.seed=1e30"], "out of range for variable 'seed'"),
+    ([*_RUN, "--set", "track.seed=99999999999999999999"], "out of range for variable 'seed'"),
+    ([*_RUN, "--set", "track.psd_level=3"], "3 is out of range for variable 'psd_level' (must be >= 0 and <= 2)"),
+    ([*_RUN, "--set", "track.V=-1"], "out of range for variable 'V' (must be >= 0)"),
+    ([*_RUN, "--set", "track.V=nan"], "non-finite value nan"),
+    ([*_RUN, "--set", "track.V=-inf"], "non-finite value -inf"),
+    ([*_RUN, "--set", "track.V=fast"], "'fast' is not a valid Real value"),
+    ([*_RUN, "--set", "track.psd_level=1.5"], "'1.5' is not a valid Integer value"),
+    ([*_RUN, "--set", "wheelset.integrator_step=0"], "integrator_step = 0 must be > 0"),
+    (["run", "track_wheelset", "--set", "experiment.stopTime=nan"], "must be a number of seconds"),
+    (["run", "track_wheelset", "--set", "experiment.stopTime=-5"], "stop time -5 s must be after"),
+    ([*_RUN, "--out", "{file}/sub"], "cannot create the folder (Not a directory)"),
+    ([*_RUN, "--out", "{file}"], "a file of that name exists"),
+    ([*_STUDY, "--runs", "0"], "--runs 0: must be from 1 to 1,000,000"),
+    ([*_STUDY, "--runs", "-1"], "--runs -1: must be from 1"),
+    ([*_STUDY, "--runs", str(10**12)], f"--runs {10**12}: must be from 1 to 1,000,000"),
+    ([*_STUDY, "--runs", "many"], "invalid int value"),
+    ([*_STUDY, "--workers", "0"], "--workers 0: must be from 1 to 1024"),
+    ([*_STUDY, "--workers", "-2"], "--workers -2: must be from 1"),
+    ([*_STUDY, "--workers", str(10**6)], f"--workers {10**6}: must be from 1 to 1024"),
+    ([*_STUDY, "--seed", "-1"], "--seed -1: must be an integer"),
+    ([*_STUDY, "--runs", "3", "--seed", "2147483647"], "the last seed 2147483649: must be an integer"),
+    ([*_STUDY, "--out", "{file}/sub"], "cannot create the folder"),
+    ([*_STUDY, "--stop-time", "-1"], "--stop-time -1: must be a positive"),
+    (["export", "track_wheelset", "-o", "{file}/x.ssp"], "a file of that name exists"),
+    (["build", "--out", "{file}/fmus"], "cannot create the folder"),
+])
+def test_every_option_with_a_bad_value_is_one_line_and_exit_2(tmp_path, args, message):
+    file = tmp_path / "a_file"
+    file.write_text("")
+    args = [a.replace("{file}", str(file)) for a in args]
+    if args[0] in ("run", "study") and "--out" not in args:
+        args += ["--out", str(tmp_path / "out")]
+    res = railfmu(*args)
+    if args[0] == "study":  # a member's error comes after the study's progress line and Dask's notes
+        assert res.returncode == 2 and "Traceback" not in res.stderr, res.stderr
+        errors = [line for line in res.stderr.splitlines() if line.startswith("railfmu: error:")]
+        assert len(errors) == 1 and message in errors[0], res.stderr
+    else:
+        _assert_one_line_error(res, message)
+
+
+@pytest.mark.skipif(not hasattr(os, "geteuid") or os.geteuid() == 0, reason="root writes anywhere")
+def test_a_read_only_output_folder_is_one_line(tmp_path):
+    ro = tmp_path / "ro"
+    ro.mkdir()
+    ro.chmod(0o555)
+    try:
+        _assert_one_line_error(railfmu(*_RUN, "--out", str(ro / "x")), f"--out {ro / 'x'}: cannot create")
+        _assert_one_line_error(railfmu(*_RUN, "--out", str(ro)), f"--out {ro}: the folder is not writable")
+    finally:
+        ro.chmod(0o755)
+
+
 def test_an_ssp_that_is_not_a_zip_is_one_line_and_exit_2(tmp_path):
     bad = tmp_path / "bad.ssp"
     bad.write_bytes(b"not a zip")
@@ -274,9 +347,9 @@ def test_fmi2_error_in_a_run_names_component_and_status_and_cites_no_unwritten_f
     res = railfmu("run", str(ssd), "--master", "container", "--out", str(out), "--set", "b.error_time=2")
     _assert_one_line_error(res, "stair.fmu (b): fmi2DoStep at t = 2 s failed: fmi2Error")
     assert "partial results: " in res.stderr and "9 rows up to t = 2 s" in res.stderr
-    # a refusal before the first row: no file to cite
-    res = railfmu("run", "track_wheelset", "--set", "track.psd_level=7", "--out", str(out))
-    _assert_one_line_error(res, "psd_level = 7")
+    # a refusal before the first row: no file to cite (m declares no min: the FMU refuses it)
+    res = railfmu("run", "track_wheelset", "--set", "wheelset.m=-1", "--out", str(out))
+    _assert_one_line_error(res, "parameter m = -1 must be > 0")
     assert "partial results" not in res.stderr
 
 

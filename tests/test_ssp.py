@@ -155,7 +155,7 @@ def test_priority_binding_system_variant_overrides(fmu_dir, tmp_path):
                    + real("step_lateral", 0.5) + real("step_vertical", 0.1))
     second = inline(real("step_vertical", 0.2))
     track = first.replace("</ssd:ParameterBindings>", "") + second.replace("<ssd:ParameterBindings>", "")
-    system = inline(real("track.harmonic_wavelength", 11) + integer("track.psd_level", 3)
+    system = inline(real("track.harmonic_wavelength", 11) + integer("track.psd_level", 1)
                     + real("track.step_lateral", 0.6))
     write_ssd(tmp_path, track=track, system=system)
     (tmp_path / "variants").mkdir()
@@ -163,7 +163,7 @@ def test_priority_binding_system_variant_overrides(fmu_dir, tmp_path):
         parameter_set("v", real("track.harmonic_wavelength", 12) + real("track.step_lateral", 0.7)))
     s = read_system(tmp_path, variant="v", fmu_dirs=[fmu_dir], overrides={"track": {"step_lateral": 0.8}})
     p = s.component("track").parameters
-    assert p == {"harmonic_phase": 0.1, "step_vertical": 0.2, "psd_level": 3, "harmonic_wavelength": 12.0,
+    assert p == {"harmonic_phase": 0.1, "step_vertical": 0.2, "psd_level": 1, "harmonic_wavelength": 12.0,
                  "step_lateral": 0.8}
     # without the variant and overrides the system-level values stand
     p = read_system(tmp_path, fmu_dirs=[fmu_dir]).component("track").parameters

@@ -102,7 +102,8 @@ def run(experiment: ExperimentRef, variant: str | None = None, *, parameters: Ma
 def study(experiment: ExperimentRef, variants: list[str] | None = None, *, runs: int = 1, seed: int | None = None,
           parameters: Mapping[str, Any] | None = None, master: str | None = None, stop_time: float | None = None,
           step_size: float | None = None, out: str | os.PathLike | None = None, scheduler: str | None = None,
-          workers: int | None = None, keep_runs: bool = False, log: TextIO | None = None) -> dict:
+          workers: int | None = None, keep_runs: bool = False, resume: bool = False,
+          log: TextIO | None = None) -> dict:
     """Run variants x seeds of an experiment in parallel (Dask) and return the study table.
 
     Parameters
@@ -124,6 +125,9 @@ def study(experiment: ExperimentRef, variants: list[str] | None = None, *, runs:
         Local cluster size (default: min(runs in all, 2)).
     keep_runs : bool
         With ``runs > 1``: keep each run's files.
+    resume : bool
+        Keep the runs a previous study into ``out`` with the same settings finished (each is
+        saved as it finishes, in ``out/runs``) and run only the missing ones.
     log : file, optional
         Where the progress lines go (default: none).
 
@@ -137,7 +141,7 @@ def study(experiment: ExperimentRef, variants: list[str] | None = None, *, runs:
 
     return run_study(str(experiment), out, scheduler=scheduler, master=master, workers=workers,
                      variants=variants, runs=runs, keep_runs=keep_runs, seed=seed,
-                     log=log if log is not None else io.StringIO(), sets=_sets(parameters),
+                     resume=resume, log=log if log is not None else io.StringIO(), sets=_sets(parameters),
                      stop_time=stop_time, step_size=step_size)
 
 

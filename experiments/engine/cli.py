@@ -32,7 +32,10 @@ from railfmu.models.errors import UserError  # noqa: E402
 def cmd_build(args) -> int:
     from railfmu.fmus.generate.build import build_all, validate
 
+    from railfmu.experiments.engine.files import ensure_folder
+
     t0 = time.monotonic()
+    ensure_folder(args.out)
     paths = build_all(args.out, force=args.force)
     for p in paths:
         problems = validate(p)
@@ -135,7 +138,7 @@ def cmd_study(args) -> int:
     from railfmu.experiments.engine.api import study
 
     study(args.experiment, args.variant, out=args.out, scheduler=args.scheduler, master=args.master,
-          workers=args.workers, runs=args.runs, keep_runs=args.keep_runs,
+          workers=args.workers, runs=args.runs, keep_runs=args.keep_runs, resume=args.resume,
           log=_log(args) or _Quiet(), **_overrides(args))
     return 0
 
@@ -144,7 +147,10 @@ def cmd_export(args) -> int:
     from railfmu.experiments.engine.api import export_system
     from railfmu.experiments.engine.runner import find_experiment
 
+    from railfmu.experiments.engine.files import ensure_folder
+
     exp = find_experiment(args.experiment)
+    ensure_folder(Path(args.output).absolute().parent, f"-o {args.output}: its folder")
     out, system = export_system(args.experiment, args.output, args.variant, **_overrides(args))
     print(f"wrote {out} ({exp.name}/{args.variant or exp.default_variant}, "
           f"{len(system.components)} FMUs inside)")
@@ -263,6 +269,9 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--keep-runs", action="store_true",
                    help="with --runs N > 1: keep each run's CSVs, plots and report (default: metrics only)")
     p.add_argument("--out", help="output folder (default out/EXP_study)")
+    p.add_argument("--resume", action="store_true",
+                   help="keep the runs a killed or finished study into --out finished (out/runs) and "
+                        "run only the missing ones")
     p.add_argument("--scheduler", help="address of a running Dask scheduler (default: a local cluster)")
     p.add_argument("--workers", type=int, help="local cluster size (default: min(runs in all, 2))")
     p.add_argument("--master", default=None, help=MASTER_HELP)

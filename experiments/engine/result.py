@@ -139,16 +139,14 @@ class Run:
             The file names written: signals.csv, estimates.csv, estimates_NAME.csv of each
             offline observer, the study's data files, metrics.json, report.md, PNG figures.
         """
-        from railfmu.models.errors import UserError
+        from railfmu.experiments.engine.files import ensure_folder, write_atomic
 
-        out = Path(folder)
-        if out.exists() and not out.is_dir():
-            raise UserError(f"--out {out}: a file of that name exists; give a folder")
-        out.mkdir(parents=True, exist_ok=True)
+        out = ensure_folder(folder)
         if self._streamed is None or self._streamed.resolve() != out.resolve():
             self._write_csvs(out)
         exp, system, metrics, bank = self._exp, self.system, self.metrics, self._bank
-        (out / "metrics.json").write_text(json.dumps(metrics, indent=2, default=json_default) + "\n")
+        # atomic: a run killed while writing leaves no metrics.json rather than half of one
+        write_atomic(out / "metrics.json", json.dumps(metrics, indent=2, default=json_default) + "\n")
         base = {**metrics, "series": self.series} if self.series else metrics  # as the study's hooks saw it
         rd = self._run_data
         data = RunData(rd.signals, rd.estimates, base, rd.roles, rd.observers)
@@ -162,7 +160,7 @@ class Run:
         self._plots = (plot_signals(exp.study.figures_of_signals, rd.signals, roles, units, out, position)
                        + plot_estimates(bank, rd.signals, units, out)
                        + exp.study.figures(RunData(rd.signals, rd.estimates, base, roles, rd.observers), out))
-        (out / "report.md").write_text(self.report())
+        write_atomic(out / "report.md", self.report())
         offline = [f"estimates_{name}.csv" for name in bank.results]
         written = ["signals.csv", "estimates.csv", *offline, *files, "metrics.json", "report.md", *self._plots]
         if log is not None:

@@ -11,7 +11,6 @@ every observer's raw error reported.
 from __future__ import annotations
 
 import difflib
-import math
 import sys
 import time
 import warnings as _warnings
@@ -23,6 +22,7 @@ from typing import TextIO
 from railfmu.estimators.track.metrics import rms
 from railfmu.models.errors import UserError
 
+from railfmu.experiments.engine.files import check_seed, check_times, ensure_folder
 from railfmu.experiments.engine.result import Run, json_default as _json_default
 from railfmu.experiments.engine.studies import HERE, Experiment, experiment_names, study_named, study_names
 from railfmu.experiments.engine.study_protocol import RunData, Study
@@ -81,9 +81,8 @@ def load_system(exp: Experiment, variant: str | None, sets: dict | None = None, 
         hint = f" (did you mean {close[0]!r}?)" if close else ""
         raise UserError(f"experiment {exp.name}: unknown variant {variant!r}{hint}; "
                         f"known: {', '.join(exp.variants) or '(none)'}")
-    for flag, value in (("--stop-time", stop_time), ("--step-size", step_size)):
-        if value is not None and not (value > 0 and math.isfinite(value)):
-            raise UserError(f"{flag} {value:g}: must be a positive number of seconds")
+    check_seed(seed)
+    check_times(stop_time, step_size)
     build_all(default_out())
     overrides = {c: dict(p) for c, p in (sets or {}).items()}
     system = read_system(exp.path, variant=variant, fmu_dirs=[default_out()], overrides=overrides,
@@ -133,7 +132,7 @@ def execute(name: str | Path, variant: str | None = None, out: Path | str | None
     master = master or system.master or DEFAULT_MASTER
     roles = exp.study.bind(system)
     if out is not None:
-        out.mkdir(parents=True, exist_ok=True)
+        ensure_folder(out)
     for w in system.warnings:
         warn(f"railfmu: warning: {w}")
     until = f" (to {system.stop_time:g} s from {system.stop_time_from})" if system.stop_time_from != "ssd:DefaultExperiment" else ""

@@ -12,6 +12,10 @@ over every numeric metric (nested keys joined with dots) and ``table.md`` shows 
 The study's ``study_tables`` runs before its ``summary_md`` and may add to a variant's summary
 what only the members' series together give (e.g. a statistic pooled over runs at each point
 of a grid), as plain values beside the statistics.
+Each finished run's metrics (and series) go at once, atomically, to ``runs/<variant>/<seed>.json``
+beside the settings they were run with (``runs/study.json``): ``--resume`` after a kill or a
+crash runs only the runs missing there, and the table is built from those files either way,
+so a resumed table equals an uninterrupted one. Without ``--resume`` a study starts afresh.
 Members write no files (no CSVs, plots or reports; ``--keep-runs`` keeps them, one
 sub-folder per variant and seed) and pay no per-run fixed cost a worker has already paid:
 imports stay loaded in the worker, the FMUs' up-to-date check derives no model.
@@ -22,6 +26,7 @@ from __future__ import annotations
 import io
 import json
 import math
+import shutil
 import sys
 import time
 from pathlib import Path
@@ -31,9 +36,12 @@ import numpy as np
 from railfmu.estimators.track.metrics import rms
 from railfmu.models.errors import UserError
 
+from railfmu.experiments.engine.files import check_seed, check_times, ensure_folder, write_atomic
 from railfmu.experiments.engine.runner import _json_default, find_experiment, run_experiment
 
 DEFAULT_FIRST_SEED = 1
+MAX_RUNS = 1_000_000  # seeds and futures are held in memory: 10**12 runs would be killed by the OOM killer
+MAX_WORKERS = 1024  # worker processes of a local cluster
 # the run's inputs, echoed in its metrics: not summarised
 INPUT_KEYS = {"parameters", "observer_settings", "roles", "seed", "start_time_s", "stop_time_s", "step_size_s",
               "simulated_seconds"}
@@ -75,8 +83,63 @@ def _run_member(name: str, variant: str, out: str | None, master: str | None, ov
     """Worker task: one run, output captured (workers have no terminal); ``out`` None writes
     nothing; ``series``: the metrics carry the study's per-run arrays (Monte Carlo figures)."""
     log = io.StringIO()
-    return run_experiment(name, variant, out, master=master, progress=False, log=log,
-                          write_files=out is not None, series=series, **overrides)
+    try:
+        return run_experiment(name, variant, out, master=master, progress=False, log=log,
+                              write_files=out is not None, series=series, **overrides)
+    except UserError as exc:  # a value, not raised: Dask would log the worker's traceback
+        return _MemberError(str(exc))
+
+
+class _MemberError(str):
+    """A member's one-line user error, handed back from the worker."""
+
+
+RUNS_DIR = "runs"
+
+
+def _canonical(result: dict) -> tuple[str, dict, dict]:
+    """A member's result as stored (JSON text) and as the table sees it (metrics; series as
+    arrays): a resumed study reads the same text back, so both paths build the same table."""
+    text = json.dumps(result, indent=1, default=_json_default) + "\n"
+    return (text, *_from_text(text))
+
+
+def _from_text(text: str) -> tuple[dict, dict]:
+    metrics = json.loads(text)
+    series = {k: None if v is None else np.asarray(v) for k, v in metrics.pop("series", {}).items()}
+    return metrics, series
+
+
+def _run_file(runs_dir: Path, variant: str, seed: int | None) -> Path:
+    return runs_dir / variant / f"{'default' if seed is None else seed}.json"
+
+
+def _stored_runs(runs_dir: Path, settings: dict, resume: bool, keys) -> dict:
+    """The runs already finished in ``runs_dir`` with these settings (``resume``), else none
+    (and the folder emptied, so no stale run is ever mixed into a table)."""
+    manifest = runs_dir / "study.json"
+    if not resume:
+        shutil.rmtree(runs_dir, ignore_errors=True)
+    elif manifest.is_file():
+        try:
+            before = json.loads(manifest.read_text())
+        except (OSError, ValueError):
+            before = None
+        if before != settings:
+            changed = [k for k in settings if not isinstance(before, dict) or before.get(k) != settings[k]]
+            raise UserError(f"--resume: {runs_dir} holds runs made with other settings "
+                            f"({', '.join(changed) or 'unreadable'}); give another --out, or drop --resume "
+                            "to start afresh")
+    runs_dir.mkdir(parents=True, exist_ok=True)
+    write_atomic(manifest, json.dumps(settings, indent=1, sort_keys=True) + "\n")
+    found = {}
+    for key in keys:
+        path = _run_file(runs_dir, *key)
+        try:
+            found[key] = _from_text(path.read_text())
+        except (OSError, ValueError):  # missing (never half-written: write_atomic)
+            continue
+    return found
 
 
 def _user_files(sets: dict) -> dict[str, str]:
@@ -118,13 +181,14 @@ def _eta(elapsed: float, done: int, total: int) -> str:
 def run_study(name: str, out: Path | str | None = None, scheduler: str | None = None,
               master: str | None = None, workers: int | None = None, variants: list[str] | None = None,
               runs: int = 1, keep_runs: bool = False, seed: int | None = None, log=sys.stderr,
-              **overrides) -> dict:
+              resume: bool = False, **overrides) -> dict:
     """Run the study; writes table.json and table.md into ``out`` and returns the table.
     ``master`` None: each run takes the experiment's preferred master (its SSD's
-    ``<rf:FixedStep master=...>``), else jacobi."""
+    ``<rf:FixedStep master=...>``), else jacobi. ``resume``: keep the runs a previous study
+    into ``out`` with the same settings finished (``out/runs``) and run only the others."""
     from dask.distributed import Client, LocalCluster, as_completed
 
-    from railfmu.fmus.generate.build import build_all, default_out
+    from railfmu.fmus.generate.build import build_all, default_out, sources_key
 
     exp = find_experiment(name)
     if not exp.variants:
@@ -132,16 +196,30 @@ def run_study(name: str, out: Path | str | None = None, scheduler: str | None = 
     unknown = [v for v in variants or [] if v not in exp.variants]
     if unknown:
         raise UserError(f"experiment {exp.name}: unknown variant {unknown[0]!r}; known: {', '.join(exp.variants)}")
-    if runs < 1:
-        raise UserError(f"--runs {runs}: must be at least 1")
+    if not 1 <= runs <= MAX_RUNS:
+        raise UserError(f"--runs {runs}: must be from 1 to {MAX_RUNS:,}")
     selected = list(dict.fromkeys(variants)) if variants else exp.variants
     monte_carlo = runs > 1
     first = seed if seed is not None else DEFAULT_FIRST_SEED
     seeds = [first + i for i in range(runs)] if monte_carlo else [seed]
+    if workers is not None and not 1 <= workers <= MAX_WORKERS:
+        raise UserError(f"--workers {workers}: must be from 1 to {MAX_WORKERS}")
+    check_seed(first)
+    check_times(overrides.get("stop_time"), overrides.get("step_size"))
+    check_seed(first + runs - 1, f"--seed {first} with --runs {runs}: the last seed")
     files = _user_files(overrides.get("sets") or {})  # relative to this folder, not the workers'
     out = Path(out or Path("out") / f"{exp.name}_study")
-    out.mkdir(parents=True, exist_ok=True)
+    ensure_folder(out)
     build_all(default_out())  # once, before workers would race to build the same FMUs
+    settings = json.loads(json.dumps({
+        "experiment": exp.name, "master": master, "monte_carlo": monte_carlo, "keep_runs": keep_runs,
+        "overrides": overrides, "fmu_sources": sources_key()[:16]}, default=str))
+    runs_dir = out / RUNS_DIR
+    wanted = [(v, s) for v in selected for s in seeds]
+    stored = _stored_runs(runs_dir, settings, resume, wanted)
+    if resume and log is not None:
+        print(f"study {exp.name}: {len(stored)} of {len(wanted)} runs already in {runs_dir}, "
+              f"{len(wanted) - len(stored)} to run", file=log)
 
     def member_out(v: str, s: int | None) -> str | None:
         if not monte_carlo:
@@ -150,36 +228,43 @@ def run_study(name: str, out: Path | str | None = None, scheduler: str | None = 
 
     cluster = None
     t0 = time.monotonic()
-    total = len(selected) * len(seeds)
+    total = len(wanted)
     target = exp.name if exp.packaged else str(exp.path)
+    results: dict[tuple[str, int | None], tuple[dict, dict]] = dict(stored)
+    todo = [k for k in wanted if k not in stored]
     try:
-        if scheduler:
+        if todo and scheduler:
             try:
                 client = Client(scheduler, timeout="10s")
             except (OSError, TimeoutError) as exc:
                 raise UserError(f"--scheduler {scheduler}: cannot connect ({exc})") from None
+        elif todo:
+            cluster = LocalCluster(n_workers=min(workers or 2, len(todo)), threads_per_worker=1, processes=True,
             _workers_see(client, scheduler, files)
         else:
             cluster = LocalCluster(n_workers=workers or min(total, 2), threads_per_worker=1, processes=True,
                                    dashboard_address=None, silence_logs=40)
             client = Client(cluster)
-        what = f"{len(selected)} variants x {runs} seeds ({seeds[0]}..{seeds[-1]})" if monte_carlo \
-            else f"{len(selected)} variants"
-        print(f"study {exp.name}: {what} on {client.scheduler.address}", file=log)
-        futures = {client.submit(_run_member, target, v, member_out(v, s), master, {**overrides, "seed": s},
-                                 monte_carlo, key=f"{exp.name}-{v}-{s}", pure=False): (v, s)
-                   for v in selected for s in seeds}
-        results: dict[tuple[str, int | None], dict] = {}
-        for i, fut in enumerate(as_completed(futures), 1):
-            v, s = futures[fut]
-            try:
-                results[v, s] = fut.result()
-            except UserError as exc:
-                raise UserError(f"variant {v}{f' seed {s}' if monte_carlo else ''}: {exc}") from None
-            elapsed = time.monotonic() - t0
-            print(f"  [{i}/{total}] {v}{f' seed {s}' if monte_carlo else ''} done ({elapsed:.1f} s, "
-                  f"{_eta(elapsed, i, total)})", file=log)
-        client.close()
+        if todo:
+            what = f"{len(selected)} variants x {runs} seeds ({seeds[0]}..{seeds[-1]})" if monte_carlo \
+                else f"{len(selected)} variants"
+            print(f"study {exp.name}: {what} on {client.scheduler.address}", file=log)
+            futures = {client.submit(_run_member, target, v, member_out(v, s), master, {**overrides, "seed": s},
+                                     monte_carlo, key=f"{exp.name}-{v}-{s}", pure=False): (v, s)
+                       for v, s in todo}
+            for i, fut in enumerate(as_completed(futures), len(stored) + 1):
+                v, s = futures[fut]
+                result = fut.result()
+                if isinstance(result, _MemberError):
+                    raise UserError(f"variant {v}{f' seed {s}' if monte_carlo else ''}: {result}")
+                text, *results[v, s] = _canonical(result)
+                path = _run_file(runs_dir, v, s)
+                path.parent.mkdir(parents=True, exist_ok=True)
+                write_atomic(path, text)  # as it finishes: a killed study keeps it
+                elapsed = time.monotonic() - t0
+                print(f"  [{i}/{total}] {v}{f' seed {s}' if monte_carlo else ''} done ({elapsed:.1f} s, "
+                      f"{_eta(elapsed, i - len(stored), total - len(stored))})", file=log)
+            client.close()
     finally:
         if cluster is not None:
             cluster.close()
@@ -187,8 +272,8 @@ def run_study(name: str, out: Path | str | None = None, scheduler: str | None = 
     if monte_carlo:
         table, series = {}, {}
         for v in selected:
-            series[v] = {s: results[v, s].pop("series", {}) for s in seeds}
-            member_runs = {s: results[v, s] for s in seeds}
+            series[v] = {s: results[v, s][1] for s in seeds}
+            member_runs = {s: results[v, s][0] for s in seeds}
             table[v] = {"runs": member_runs, "summary": summarise(member_runs)}
         extra = exp.study.study_tables(table, series)  # first: it may add values pooled over runs to a summary
         md.append(exp.study.summary_md({v: t["summary"] for v, t in table.items()}, runs))
@@ -198,10 +283,10 @@ def run_study(name: str, out: Path | str | None = None, scheduler: str | None = 
         md += ["", "Each run's files are in <variant>/seed_<seed>/." if keep_runs else
                "Members wrote no files (--keep-runs keeps each run's signals, plots and report)."]
     else:
-        table = {v: results[v, seeds[0]] for v in selected}
+        table = {v: results[v, seeds[0]][0] for v in selected}
         md += [exp.study.table_md(table), "",
                "Each variant's signals, estimates, plots and report are in its sub-folder."]
-    (out / "table.json").write_text(json.dumps(table, indent=2, default=_json_default) + "\n")
-    (out / "table.md").write_text("\n".join(md) + "\n")
+    write_atomic(out / "table.json", json.dumps(table, indent=2, default=_json_default) + "\n")
+    write_atomic(out / "table.md", "\n".join(md) + "\n")
     print(f"wrote {out}/table.json, table.md ({time.monotonic() - t0:.1f} s)", file=log)
     return table

@@ -58,6 +58,7 @@ import contextlib
 import ctypes
 import heapq
 import math
+import os
 import sys
 import time
 from collections.abc import Mapping, Sequence
@@ -365,6 +366,28 @@ class _Sampler:
         self.count = k + 1
 
 
+def _physical_memory() -> int | None:
+    try:
+        return os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+    except (ValueError, OSError, AttributeError):
+        return None
+
+
+def _row_buffer(n: int, columns: list[str]) -> np.ndarray:
+    """The (n + 1) x columns rows of a run, or a one-line error when they cannot fit in
+    this machine's memory (numpy would raise, or the kernel kill the run half-way)."""
+    need, have = (n + 1) * len(columns) * 8, _physical_memory()
+    if have is not None and need > have:
+        raise UserError(f"{n:,} steps x {len(columns)} recorded signals need {need / 2**30:,.1f} GiB, more "
+                        f"than this machine's {have / 2**30:,.1f} GiB of memory: shorten the stop time, "
+                        "lengthen the step or record fewer signals")
+    try:
+        return np.empty((n + 1, len(columns)))
+    except (MemoryError, ValueError):
+        raise UserError(f"{n:,} steps x {len(columns)} recorded signals ({need / 2**30:,.1f} GiB) do not fit "
+                        "in memory: shorten the stop time, lengthen the step or record fewer signals") from None
+
+
 def _run_python(system: System, master: str, sinks: Sequence[Sink], progress: bool,
                 max_steps: int | None = None) -> RunResult:
     """``max_steps``: stop after that many steps (the container's replay of a failure)."""
@@ -403,7 +426,7 @@ def _run_python(system: System, master: str, sinks: Sequence[Sink], progress: bo
         links = _links(transfer, fmus)
         record = recorded_signals(system)
         columns = ["time", *record]
-        data = np.empty((n + 1, len(columns)))
+        data = _row_buffer(n, columns)
         sampler = _Sampler(record, fmus, data, system)
         for s in slaves.values():
             s.exit_initialization()
@@ -548,7 +571,7 @@ def _run_container(system: System, sinks: Sequence[Sink], progress: bool) -> Run
             rcols=None if contiguous else arr(ctypes.c_size_t, rc), icols=arr(ctypes.c_size_t, ic),
             bcols=arr(ctypes.c_size_t, bc), nr=len(rv), ni=len(iv), nb=len(bv),
             rbuf=arr(ctypes.c_double, [0.0] * len(rv)), ibuf=arr(ctypes.c_int, [0] * max(len(iv), len(bv))))
-        data = np.empty((n + 1, len(columns)))
+        data = _row_buffer(n, columns)
         base, row_bytes = data.ctypes.data, data.strides[0]
         st = _sample_signals(sig, f, data[0])
         if st > Status.WARNING:

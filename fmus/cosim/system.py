@@ -282,6 +282,9 @@ def _compiled(fmu: Path, where: str) -> Path:
 
 # -- the one set of checks ---------------------------------------------------------------------
 
+MAX_STEPS = 2**40  # ~35 years at 1 ms; far past what the masters' row buffer could hold
+
+
 def n_steps(start: float, stop: float, h: float, where: str = "") -> int:
     """The number of communication steps of ``[start, stop]`` at ``h``: UserError unless ``h``
     divides the interval to 1e-9 of a step."""
@@ -292,6 +295,9 @@ def n_steps(start: float, stop: float, h: float, where: str = "") -> int:
         raise UserError(f"{at}step size {h:g} s must be positive")
     if stop <= start:
         raise UserError(f"{at}stop time {stop:g} s must be after the start time {start:g} s")
+    if (stop - start) / h > MAX_STEPS:
+        raise UserError(f"{at}[{start:g}, {stop:g}] s at {h:g} s is {(stop - start) / h:.3g} steps: more than "
+                        f"the {MAX_STEPS:,} a run can take (shorten the stop time or lengthen the step)")
     n = round((stop - start) / h)
     if n < 1 or abs((stop - start) / h - n) > 1e-9 * max(n, 1):
         raise UserError(f"{at}step size {h:g} s does not divide the interval [{start:g}, {stop:g}] s")

@@ -33,11 +33,18 @@ COMMON_DIR = FMUS / "native" / "common"  # C shared by several models: RNG, CSV 
 PLATFORM = "linux64"
 CFLAGS = ["-std=c99", "-O2", "-fPIC", "-shared", "-fvisibility=hidden", "-Wall", "-Wextra", "-Werror"]
 FMI_HEADERS = ["fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h"]
+# Extra flags for every FMU, e.g. "-fsanitize=address,undefined" (`make sanitize`, with
+# RAILFMU_CACHE elsewhere); part of sources_key, so they never mix with a normal build.
+EXTRA_CFLAGS_ENV = "RAILFMU_EXTRA_CFLAGS"
 _ZIP_DATE = (2020, 1, 1, 0, 0, 0)  # fixed timestamps: the same model gives the same archive
 
 
 class BuildError(RuntimeError):
     """A model could not be generated, compiled or packaged."""
+
+
+def cflags() -> list[str]:
+    return [*CFLAGS, *os.environ.get(EXTRA_CFLAGS_ENV, "").split()]
 
 
 def fmi_header_dir() -> Path:
@@ -120,7 +127,7 @@ def sources_key() -> str:
     never derives (a Monte Carlo member pays it on every run)."""
     import fmpy
 
-    h = hashlib.sha256(repr((CFLAGS, os.environ.get("CC", "gcc"), fmpy.__version__)).encode())
+    h = hashlib.sha256(repr((cflags(), os.environ.get("CC", "gcc"), fmpy.__version__)).encode())
     roots = [FMUS.parent / "models", RUNTIME_DIR, CSRC_DIR, COMMON_DIR]
     files = [f for r in roots for f in sorted(r.rglob("*")) if f.is_file() and "__pycache__" not in f.parts]
     files += [HERE / "codegen.py", HERE / "build.py", FMUS / "units.py"]
@@ -209,7 +216,7 @@ def build_fmu(model: Model, out_dir: Path | str | None = None, force: bool = Fal
         binary = root / "binaries" / PLATFORM / f"{model.identifier}.so"
         binary.parent.mkdir(parents=True)
         cc = os.environ.get("CC", "gcc")
-        cmd = [cc, *CFLAGS, "-I", str(root / "sources"), "-o", str(binary),
+        cmd = [cc, *cflags(), "-I", str(root / "sources"), "-o", str(binary),
                *[str(root / "sources" / f) for f in c_files], "-lm"]
         try:
             res = subprocess.run(cmd, capture_output=True, text=True)

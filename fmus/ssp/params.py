@@ -145,12 +145,12 @@ def from_ssv(v: ParamValue, var, var_units: Units) -> Value:
             x = a * x + b
         if v.linear:
             x = v.linear[0] * x + v.linear[1]
-        return _finite(x, v.where)
+        return in_range(_finite(x, v.where), var, v.where)
     if v.kind == "Integer" and t in ("Integer", "Enumeration"):
         value = v.value if not v.linear else v.linear[0] * v.value + v.linear[1]
         if not math.isfinite(value) or value != int(value):
             raise UserError(f"{v.where}: {value!r} is not an integer for variable {fmu}")
-        return int(value)
+        return in_range(int(value), var, v.where)
     if v.kind == t and t in ("Boolean", "String"):
         return v.value
     if v.kind == "Enumeration" and t == "Enumeration":
@@ -173,9 +173,15 @@ def from_cli(value, var, where: str) -> Value:
         except ValueError:
             pass
     if t == "Real" and number is not None:
-        return _finite(float(number), where)
-    if t in ("Integer", "Enumeration") and number is not None and float(number).is_integer():
-        return int(number)
+        return in_range(_finite(float(number), where), var, where)
+    if t in ("Integer", "Enumeration") and text is not None:
+        try:
+            number = int(text)  # exactly: float() would round 2**53 + 1
+        except ValueError:
+            pass
+    if t in ("Integer", "Enumeration") and number is not None and math.isfinite(number) \
+            and float(number).is_integer():
+        return in_range(int(number), var, where)
     if t == "Enumeration" and text in _enum_items(var):
         return _enum_items(var)[text]
     if t == "Boolean":
@@ -189,6 +195,26 @@ def from_cli(value, var, where: str) -> Value:
     if t == "String" and text is not None:
         return value
     raise UserError(f"{where}: {value!r} is not a valid {t} value for variable {var.name!r}")
+
+
+INT32 = (-(2**31), 2**31 - 1)  # fmi2Integer is a C int: a larger value would wrap silently
+
+
+def in_range(x, var, where: str):
+    """``x`` within the variable's declared min and max (and an Integer's C int range)."""
+    lo, hi = (float(b) if b not in (None, "") else None
+              for b in (getattr(var, "min", None), getattr(var, "max", None)))
+    if var.type in ("Integer", "Enumeration"):
+        lo = INT32[0] if lo is None else max(lo, INT32[0])
+        hi = INT32[1] if hi is None else min(hi, INT32[1])
+    if (lo is not None and x < lo) or (hi is not None and x > hi):
+        def show(b: float) -> str:
+            return str(int(b)) if float(b).is_integer() else repr(b)
+
+        bounds = " and ".join(b for b in (f">= {show(lo)}" if lo is not None else "",
+                                          f"<= {show(hi)}" if hi is not None else "") if b)
+        raise UserError(f"{where}: {x!r} is out of range for variable {var.name!r} (must be {bounds})")
+    return x
 
 
 def _finite(x: float, where: str) -> float:

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import atexit
 import functools
+import os
 import shutil
 import tempfile
 import zipfile
@@ -98,6 +99,47 @@ def locate(path) -> Root:
 
 _EXTRACTED: dict[tuple, Path] = {}
 
+# Unpacking limits (an SSP is untrusted input: a 2 MB archive can unpack to terabytes). The
+# sizes are the members' declared ones, which zipfile never exceeds when extracting.
+LIMITS = {  # env var: (default, what it bounds)
+    "RAILFMU_SSP_MAX_BYTES": (1 << 30, "total unpacked size in bytes"),
+    "RAILFMU_SSP_MAX_MEMBERS": (10_000, "number of members"),
+    "RAILFMU_SSP_MAX_RATIO": (200, "compression ratio of a member over 1 MiB"),
+}
+_RATIO_FROM = 1 << 20  # small members may compress well; only large ones can bomb
+
+
+def limit(name: str) -> int:
+    default = LIMITS[name][0]
+    text = os.environ.get(name, "").strip()
+    if not text:
+        return default
+    try:
+        value = int(float(text))
+    except ValueError:
+        raise UserError(f"{name}={text!r}: expected a positive number") from None
+    if value < 1:
+        raise UserError(f"{name}={text!r}: expected a positive number")
+    return value
+
+
+def _check_limits(archive: Path, infos: list[zipfile.ZipInfo]) -> None:
+    def refuse(name: str, found: str) -> None:
+        raise UserError(f"{archive}: refused to unpack: {found} exceeds the limit of {limit(name):,} "
+                        f"({LIMITS[name][1]}); raise it with the environment variable {name} if the "
+                        "archive is trusted")
+
+    if len(infos) > limit("RAILFMU_SSP_MAX_MEMBERS"):
+        refuse("RAILFMU_SSP_MAX_MEMBERS", f"{len(infos):,} members")
+    total = 0
+    for info in infos:
+        total += info.file_size
+        if total > limit("RAILFMU_SSP_MAX_BYTES"):
+            refuse("RAILFMU_SSP_MAX_BYTES", f"{total:,} bytes (at {info.filename})")
+        ratio = info.file_size / max(info.compress_size, 1)
+        if info.file_size > _RATIO_FROM and ratio > limit("RAILFMU_SSP_MAX_RATIO"):
+            refuse("RAILFMU_SSP_MAX_RATIO", f"{info.filename}: ratio {ratio:,.0f}")
+
 
 def _extract(archive: Path) -> Path:
     """Unpack a .ssp once per process (per version of the file); removed at exit, because the
@@ -112,6 +154,7 @@ def _extract(archive: Path) -> Path:
     atexit.register(shutil.rmtree, folder, True)
     try:
         with zipfile.ZipFile(archive) as zf:
+            _check_limits(archive, zf.infolist())
             zf.extractall(folder)  # zipfile drops '..' and absolute member names
     except (zipfile.BadZipFile, zipfile.LargeZipFile, OSError, RuntimeError, ValueError) as exc:
         raise UserError(f"{archive}: cannot unpack the SSP archive: {one_line(exc)}") from None
@@ -151,12 +194,26 @@ def schema_problems(el, kind: str, shown: str) -> list[str]:
 
 def parse_xml(file: Path, shown: str):
     """The root element of an XML file; malformed or unreadable -> UserError."""
+    # SSP files need no DTD; one is how entity bombs (billion laughs) and external entities
+    # (XXE) come in: refused before parsing (libxml2 would expand entities in attributes even
+    # with resolve_entities=False, up to its amplification limit), and after it as a backstop
+    # for a DOCTYPE further down than the head read here
     try:
-        return etree.parse(str(file), _PARSER).getroot()
+        with open(file, "rb") as f:
+            head = f.read(1 << 16)
+    except OSError as exc:
+        raise UserError(f"{shown}: cannot read: {one_line(exc.strerror or exc)}") from None
+    if b"<!DOCTYPE" in head:
+        raise UserError(f"{shown}: a DOCTYPE (DTD, entities) is not allowed in an SSP file")
+    try:
+        tree = etree.parse(str(file), _PARSER)
     except etree.XMLSyntaxError as exc:
         raise UserError(f"{shown}:{exc.lineno}: malformed XML: {one_line(exc.msg)}") from None
     except OSError as exc:
         raise UserError(f"{shown}: cannot read: {one_line(exc.strerror or exc)}") from None
+    if tree.docinfo.internalDTD is not None or tree.docinfo.doctype:
+        raise UserError(f"{shown}: a DOCTYPE (DTD, entities) is not allowed in an SSP file")
+    return tree.getroot()
 
 
 def parse_checked(file: Path, kind: str, shown: str):

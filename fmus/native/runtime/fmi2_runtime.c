@@ -90,10 +90,28 @@ typedef struct {
 } Instance;
 
 /* A saved FMU state (fmi2GetFMUstate). Everything a continuation depends on: modelData is
-   derived from parameters and rebuilt by model_state_restored (see model.h). */
+   derived from parameters and rebuilt by model_state_restored (see model.h).
+   Every railfmu FMU shares the header layout, so a state handed to the wrong FMU (same
+   magic) is recognised from the header alone, before anything of its own size is read:
+   the payload layout differs per model and copying it would overrun the heap. */
 #define SNAPSHOT_MAGIC 0x52464d53u /* "RFMS" */
+#define SNAPSHOT_VERSION 0x52460002u /* unlike any ModelState: a pre-header state (its state after the magic) fails here */
+#define ID_CHARS 64 /* GUID and identifier fields, NUL-padded */
+#define STR_(x) #x
+#define STR(x) STR_(x)
+#define MODEL_IDENTIFIER_STRING STR(MODEL_IDENTIFIER)
 typedef struct {
-    unsigned magic;
+    uint32_t magic;
+    uint32_t version;
+    uint64_t size;            /* sizeof(Snapshot) of the FMU that saved it */
+    char guid[ID_CHARS];
+    char identifier[ID_CHARS];
+    uint32_t checksum;        /* FNV-1a of the payload (string pointers included) ... */
+    uint32_t strings_checksum; /* ... and of the strings, checked once the pointers are
+                                  trusted: a stray write or a reused block is refused */
+} SnapshotHeader;
+
+typedef struct {
     ModelState state;
     double startTime;
     double stopTime;
@@ -113,7 +131,16 @@ typedef struct {
 #if N_STRING > 0
     char *s[N_STRING];
 #endif
+} SnapshotPayload;
+
+typedef struct {
+    SnapshotHeader h; /* first: readable whichever FMU made the state */
+    SnapshotPayload p;
 } Snapshot;
+
+/* compile-time check that GUID and identifier fit their fields (C99: no _Static_assert) */
+typedef char guid_fits[sizeof(MODEL_GUID) <= ID_CHARS ? 1 : -1];
+typedef char identifier_fits[sizeof(MODEL_IDENTIFIER_STRING) <= ID_CHARS ? 1 : -1];
 
 /* ---- small helpers ------------------------------------------------------------------ */
 
@@ -947,22 +974,98 @@ fmi2Status fmi2SetString(fmi2Component c, const fmi2ValueReference vr[], size_t 
 
 /* ---- FMU state (FMI 2.0.4, 2.1.8) --------------------------------------------------- */
 
-static void snapshot_free_strings(Snapshot *st) {
+static void snapshot_free_strings(SnapshotPayload *p) {
 #if N_STRING > 0
-    free_string_array(st->s);
+    free_string_array(p->s);
 #else
-    (void)st;
+    (void)p;
 #endif
 }
 
-static Snapshot *as_snapshot(ModelInstance *m, const char *function, fmi2FMUstate p) {
-    Snapshot *st = (Snapshot *)p;
+#define FNV_OFFSET 2166136261u
+static uint32_t fnv1a(uint32_t h, const void *data, size_t n) {
+    const unsigned char *b = (const unsigned char *)data;
+    size_t k;
+    for (k = 0; k < n; k++) h = (h ^ b[k]) * 16777619u;
+    return h;
+}
+
+static uint32_t payload_checksum(const SnapshotPayload *p) {
+    return fnv1a(FNV_OFFSET, p, sizeof *p);
+}
+
+static uint32_t strings_checksum(const SnapshotPayload *p) {
+    uint32_t h = FNV_OFFSET;
+#if N_STRING > 0
+    size_t k;
+    for (k = 0; k < N_STRING; k++)
+        if (p->s[k]) h = fnv1a(h, p->s[k], strlen(p->s[k]) + 1);
+#else
+    (void)p;
+#endif
+    return h;
+}
+
+static void seal(Snapshot *st) {
+    st->h.checksum = payload_checksum(&st->p);
+    st->h.strings_checksum = strings_checksum(&st->p);
+}
+
+/* A NUL-padded field of a header that may come from anywhere: printable, bounded. */
+static void field_text(char out[ID_CHARS], const char *field) {
+    size_t k;
+    for (k = 0; k + 1 < ID_CHARS && field[k]; k++)
+        out[k] = (field[k] >= 32 && field[k] < 127) ? field[k] : '?';
+    out[k] = '\0';
+}
+
+static void fill_header(SnapshotHeader *h) {
+    h->magic = SNAPSHOT_MAGIC;
+    h->version = SNAPSHOT_VERSION;
+    h->size = (uint64_t)sizeof(Snapshot);
+    memset(h->guid, 0, ID_CHARS);
+    memcpy(h->guid, MODEL_GUID, sizeof MODEL_GUID);
+    memset(h->identifier, 0, ID_CHARS);
+    memcpy(h->identifier, MODEL_IDENTIFIER_STRING, sizeof MODEL_IDENTIFIER_STRING);
+}
+
+/* The state if it is one of this FMU's, intact; else NULL with the reason logged. The
+   header is checked before the payload is touched (a foreign state may be smaller). */
+static Snapshot *as_snapshot(ModelInstance *m, const char *function, fmi2FMUstate ptr) {
+    Snapshot *st = (Snapshot *)ptr;
+    SnapshotHeader own;
+    char guid[ID_CHARS];
     if (!st) {
         model_error(m, "%s: FMUstate is NULL", function);
         return NULL;
     }
-    if (st->magic != SNAPSHOT_MAGIC) {
-        model_error(m, "%s: FMUstate was not created by this FMU (or was freed)", function);
+    if (st->h.magic != SNAPSHOT_MAGIC) {
+        model_error(m, "%s: FMUstate was not created by a railfmu FMU (or was freed)", function);
+        return NULL;
+    }
+    if (st->h.version != SNAPSHOT_VERSION) {
+        model_error(m, "%s: FMUstate has format version %lu, this FMU uses %lu", function,
+                    (unsigned long)st->h.version, (unsigned long)SNAPSHOT_VERSION);
+        return NULL;
+    }
+    fill_header(&own); /* whole fields, padding included: nothing unchecked in the header */
+    if (memcmp(st->h.guid, own.guid, ID_CHARS) != 0 ||
+        memcmp(st->h.identifier, own.identifier, ID_CHARS) != 0) {
+        char ident[ID_CHARS];
+        field_text(ident, st->h.identifier);
+        field_text(guid, st->h.guid);
+        model_error(m, "%s: FMUstate was saved by another FMU (%s, GUID %s), not by %s (GUID %s)",
+                    function, ident, guid, MODEL_IDENTIFIER_STRING, MODEL_GUID);
+        return NULL;
+    }
+    if (st->h.size != (uint64_t)sizeof(Snapshot)) {
+        model_error(m, "%s: FMUstate has %lu bytes, this FMU's have %lu", function,
+                    (unsigned long)st->h.size, (unsigned long)sizeof(Snapshot));
+        return NULL;
+    }
+    if (st->h.checksum != payload_checksum(&st->p) ||
+        st->h.strings_checksum != strings_checksum(&st->p)) {
+        model_error(m, "%s: FMUstate is damaged (checksum mismatch)", function);
         return NULL;
     }
     return st;
@@ -970,6 +1073,7 @@ static Snapshot *as_snapshot(ModelInstance *m, const char *function, fmi2FMUstat
 
 fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *FMUstate) {
     Snapshot *st;
+    SnapshotPayload *p;
     ENTER("fmi2GetFMUstate", MASK_FMUstate);
     if (null_arg(m, "fmi2GetFMUstate", "FMUstate", FMUstate)) return fmi2Error;
 
@@ -977,39 +1081,40 @@ fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *FMUstate) {
     if (*FMUstate) {
         st = as_snapshot(m, "fmi2GetFMUstate", *FMUstate);
         if (!st) return fmi2Error;
-        snapshot_free_strings(st);
+        snapshot_free_strings(&st->p);
     } else {
         st = (Snapshot *)calloc(1, sizeof *st);
         if (!st) {
             model_error(m, "fmi2GetFMUstate: out of memory");
             return fmi2Error;
         }
-        st->magic = SNAPSHOT_MAGIC;
+        fill_header(&st->h);
     }
-    st->state = m->state;
-    st->startTime = m->startTime;
-    st->stopTime = m->stopTime;
-    st->stopTimeDefined = m->stopTimeDefined;
-    st->lastSuccessfulTime = m->lastSuccessfulTime;
-    st->inputTime = m->inputTime;
-    st->stepSize = m->stepSize;
-    st->terminateRequested = inst->terminateRequested;
-    st->terminateTime = inst->terminateTime;
-    memcpy(st->r, m->r, sizeof st->r);
+    p = &st->p;
+    p->state = m->state;
+    p->startTime = m->startTime;
+    p->stopTime = m->stopTime;
+    p->stopTimeDefined = m->stopTimeDefined;
+    p->lastSuccessfulTime = m->lastSuccessfulTime;
+    p->inputTime = m->inputTime;
+    p->stepSize = m->stepSize;
+    p->terminateRequested = inst->terminateRequested;
+    p->terminateTime = inst->terminateTime;
+    memcpy(p->r, m->r, sizeof p->r);
 #if N_INTEGER > 0
-    memcpy(st->i, m->i, sizeof st->i);
+    memcpy(p->i, m->i, sizeof p->i);
 #endif
 #if N_BOOLEAN > 0
-    memcpy(st->b, m->b, sizeof st->b);
+    memcpy(p->b, m->b, sizeof p->b);
 #endif
 #if N_STRING > 0
     {
         size_t k;
         for (k = 0; k < N_STRING; k++) {
-            st->s[k] = dup_string(m->s[k]);
-            if (!st->s[k]) {
-                snapshot_free_strings(st);
-                st->magic = 0;
+            p->s[k] = dup_string(m->s[k]);
+            if (!p->s[k]) {
+                snapshot_free_strings(p);
+                st->h.magic = 0;
                 free(st);
                 *FMUstate = NULL;
                 model_error(m, "fmi2GetFMUstate: out of memory");
@@ -1018,15 +1123,18 @@ fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *FMUstate) {
         }
     }
 #endif
+    seal(st);
     *FMUstate = (fmi2FMUstate)st;
     return fmi2OK;
 }
 
 fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate FMUstate) {
     const Snapshot *st;
+    const SnapshotPayload *p;
     ENTER("fmi2SetFMUstate", MASK_FMUstate);
     st = as_snapshot(m, "fmi2SetFMUstate", FMUstate);
-    if (!st) return fmi2Error;
+    if (!st) return fmi2Error; /* nothing changed: the instance goes on as before */
+    p = &st->p;
 
 #if N_STRING > 0
     {
@@ -1035,7 +1143,7 @@ fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate FMUstate) {
         size_t k;
         int failed = 0;
         for (k = 0; k < N_STRING; k++) {
-            copies[k] = failed ? NULL : dup_string(st->s[k]);
+            copies[k] = failed ? NULL : dup_string(p->s[k]);
             if (!copies[k]) failed = 1;
         }
         if (failed) {
@@ -1047,22 +1155,22 @@ fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate FMUstate) {
         for (k = 0; k < N_STRING; k++) m->s[k] = copies[k];
     }
 #endif
-    memcpy(m->r, st->r, sizeof m->r);
+    memcpy(m->r, p->r, sizeof m->r);
 #if N_INTEGER > 0
-    memcpy(m->i, st->i, sizeof m->i);
+    memcpy(m->i, p->i, sizeof m->i);
 #endif
 #if N_BOOLEAN > 0
-    memcpy(m->b, st->b, sizeof m->b);
+    memcpy(m->b, p->b, sizeof m->b);
 #endif
-    m->startTime = st->startTime;
-    m->stopTime = st->stopTime;
-    m->stopTimeDefined = st->stopTimeDefined;
-    m->lastSuccessfulTime = st->lastSuccessfulTime;
-    m->inputTime = st->inputTime;
-    m->stepSize = st->stepSize;
-    inst->terminateRequested = st->terminateRequested;
-    inst->terminateTime = st->terminateTime;
-    m->state = st->state;
+    m->startTime = p->startTime;
+    m->stopTime = p->stopTime;
+    m->stopTimeDefined = p->stopTimeDefined;
+    m->lastSuccessfulTime = p->lastSuccessfulTime;
+    m->inputTime = p->inputTime;
+    m->stepSize = p->stepSize;
+    inst->terminateRequested = p->terminateRequested;
+    inst->terminateTime = p->terminateTime;
+    m->state = p->state;
 
     /* modelData is not part of the state: drop it, and rebuild it from the restored
        parameters if the restored state is past initialisation (before that,
@@ -1087,8 +1195,8 @@ fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate *FMUstate) {
     if (!*FMUstate) return fmi2OK; /* like free(NULL) */
     st = as_snapshot(m, "fmi2FreeFMUstate", *FMUstate);
     if (!st) return fmi2Error;
-    snapshot_free_strings(st);
-    st->magic = 0; /* a second free is caught (as long as the memory is not reused) */
+    snapshot_free_strings(&st->p);
+    st->h.magic = 0; /* a second free is caught (as long as the memory is not reused) */
     free(st);
     *FMUstate = NULL;
     return fmi2OK;
@@ -1096,14 +1204,34 @@ fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate *FMUstate) {
 
 /* Serialized layout, native byte order (a state is restored on the platform that saved it;
    the version word read back in the wrong byte order fails the header check):
-     "RFMU"  uint32 format version  uint32 N_REAL N_INTEGER N_BOOLEAN N_STRING
-     uint32 strlen(MODEL_GUID)  GUID bytes
+     "RFMU"  uint32 format version  uint32 total size in bytes (this header to the CRC)
+     uint32 strlen(MODEL_IDENTIFIER)  identifier bytes  uint32 strlen(MODEL_GUID)  GUID bytes
+     uint32 N_REAL N_INTEGER N_BOOLEAN N_STRING
      int32 state  int32 stopTimeDefined  double startTime stopTime lastSuccessfulTime inputTime
      stepSize  int32 terminateRequested  double terminateTime
      double r[N_REAL]  int32 i[N_INTEGER]  int32 b[N_BOOLEAN]
-     per string: uint32 length, bytes (no terminator) */
+     per string: uint32 length, bytes (no terminator)
+     uint32 CRC-32 (IEEE, as zlib.crc32) of every byte before it
+   The size and CRC come first in the checks: a truncated or damaged blob is refused before
+   any of its fields is believed. */
 #define SER_MAGIC "RFMU"
-#define SER_VERSION 2u /* 2: stepSize, the terminate request */
+#define SER_VERSION 3u /* 2: stepSize, the terminate request; 3: size, identifier, CRC-32 */
+
+/* CRC-32, four bits at a time: a 16-entry constant table (no global mutable state) */
+static uint32_t crc32_update(uint32_t crc, const unsigned char *b, size_t n) {
+    static const uint32_t t[16] = {
+        0x00000000u, 0x1db71064u, 0x3b6e20c8u, 0x26d930acu, 0x76dc4190u, 0x6b6b51f4u,
+        0x4db26158u, 0x5005713cu, 0xedb88320u, 0xf00f9344u, 0xd6d6a3e8u, 0xcb61b38cu,
+        0x9b64c2b0u, 0x86d3d2d4u, 0xa00ae278u, 0xbdbdf21cu};
+    size_t k;
+    crc = ~crc;
+    for (k = 0; k < n; k++) {
+        crc ^= b[k];
+        crc = (crc >> 4) ^ t[crc & 15u];
+        crc = (crc >> 4) ^ t[crc & 15u];
+    }
+    return ~crc;
+}
 
 typedef struct {
     unsigned char *w;       /* writing: destination (NULL: only count) */
@@ -1140,21 +1268,25 @@ static int32_t get_i32(Cursor *cu) {
     return v;
 }
 
-static void write_header(Cursor *cu) {
+/* total: the whole blob's size (0 while counting) */
+static void write_header(Cursor *cu, uint32_t total) {
     put(cu, SER_MAGIC, 4);
     put_u32(cu, SER_VERSION);
+    put_u32(cu, total);
+    put_u32(cu, (uint32_t)strlen(MODEL_IDENTIFIER_STRING));
+    put(cu, MODEL_IDENTIFIER_STRING, strlen(MODEL_IDENTIFIER_STRING));
+    put_u32(cu, (uint32_t)strlen(MODEL_GUID));
+    put(cu, MODEL_GUID, strlen(MODEL_GUID));
     put_u32(cu, (uint32_t)N_REAL);
     put_u32(cu, (uint32_t)N_INTEGER);
     put_u32(cu, (uint32_t)N_BOOLEAN);
     put_u32(cu, (uint32_t)N_STRING);
-    put_u32(cu, (uint32_t)strlen(MODEL_GUID));
-    put(cu, MODEL_GUID, strlen(MODEL_GUID));
 }
 
-/* With cu->w == NULL this only counts the bytes. */
-static void write_snapshot(Cursor *cu, const Snapshot *st) {
+/* With cu->w == NULL this only counts the bytes (the CRC included). */
+static void write_snapshot(Cursor *cu, const SnapshotPayload *st, uint32_t total) {
     size_t k;
-    write_header(cu);
+    write_header(cu, total);
     put_i32(cu, (int32_t)st->state);
     put_i32(cu, (int32_t)st->stopTimeDefined);
     put(cu, &st->startTime, sizeof(double));
@@ -1179,37 +1311,46 @@ static void write_snapshot(Cursor *cu, const Snapshot *st) {
         if (n) put(cu, st->s[k], n);
     }
 #endif
+    put_u32(cu, cu->w ? crc32_update(0, cu->w, cu->pos) : 0u);
+}
+
+static size_t serialized_size(const SnapshotPayload *st) {
+    Cursor cu = {NULL, NULL, 0, 0, 1};
+    write_snapshot(&cu, st, 0);
+    return cu.pos;
 }
 
 fmi2Status fmi2SerializedFMUstateSize(fmi2Component c, fmi2FMUstate FMUstate, size_t *size) {
     const Snapshot *st;
-    Cursor cu = {NULL, NULL, 0, 0, 1};
     ENTER("fmi2SerializedFMUstateSize", MASK_FMUstate);
     st = as_snapshot(m, "fmi2SerializedFMUstateSize", FMUstate);
     if (!st || null_arg(m, "fmi2SerializedFMUstateSize", "size", size)) return fmi2Error;
-    write_snapshot(&cu, st);
-    *size = cu.pos;
+    *size = serialized_size(&st->p);
     return fmi2OK;
 }
 
 fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate FMUstate,
                                  fmi2Byte serializedState[], size_t size) {
     const Snapshot *st;
+    size_t needed;
     Cursor cu = {NULL, NULL, 0, 0, 1};
     ENTER("fmi2SerializeFMUstate", MASK_FMUstate);
     st = as_snapshot(m, "fmi2SerializeFMUstate", FMUstate);
     if (!st || null_arg(m, "fmi2SerializeFMUstate", "serializedState", serializedState))
         return fmi2Error;
-    write_snapshot(&cu, st); /* count */
-    if (size < cu.pos) {
+    needed = serialized_size(&st->p);
+    if (size < needed) {
         model_error(m, "fmi2SerializeFMUstate: buffer of %lu bytes is too small (%lu needed, "
                        "see fmi2SerializedFMUstateSize)",
-                    (unsigned long)size, (unsigned long)cu.pos);
+                    (unsigned long)size, (unsigned long)needed);
+        return fmi2Error;
+    }
+    if (needed > 0xffffffffu) {
+        model_error(m, "fmi2SerializeFMUstate: the state is larger than 4 GiB");
         return fmi2Error;
     }
     cu.w = (unsigned char *)serializedState;
-    cu.pos = 0;
-    write_snapshot(&cu, st);
+    write_snapshot(&cu, &st->p, (uint32_t)needed);
     return fmi2OK;
 }
 
@@ -1219,10 +1360,11 @@ static int deser_fail(ModelInstance *m, const char *what) {
 }
 
 /* Reads a serialized state into st (strings malloc'ed). Returns 1 on success. */
-static int read_snapshot(ModelInstance *m, Cursor *cu, Snapshot *st) {
+static int read_snapshot(ModelInstance *m, Cursor *cu, SnapshotPayload *st) {
     char magic[4];
-    uint32_t version, nr, ni, nb, ns, nguid;
+    uint32_t version, total, nr, ni, nb, ns, nid, nguid, crc;
     char guid[sizeof MODEL_GUID];
+    char ident[sizeof MODEL_IDENTIFIER_STRING];
     size_t k;
     int32_t state;
 
@@ -1230,20 +1372,42 @@ static int read_snapshot(ModelInstance *m, Cursor *cu, Snapshot *st) {
     if (!cu->ok || memcmp(magic, SER_MAGIC, 4) != 0)
         return deser_fail(m, "not a serialized railfmu FMU state (bad magic)");
     version = get_u32(cu);
-    if (!cu->ok || version != SER_VERSION)
-        return deser_fail(m, "unsupported format version or byte order");
-    nr = get_u32(cu);
-    ni = get_u32(cu);
-    nb = get_u32(cu);
-    ns = get_u32(cu);
-    if (!cu->ok || nr != N_REAL || ni != N_INTEGER || nb != N_BOOLEAN || ns != N_STRING)
-        return deser_fail(m, "the state has other variable counts than this FMU");
+    if (!cu->ok || version != SER_VERSION) {
+        model_error(m, "fmi2DeSerializeFMUstate: format version %lu or other byte order; this "
+                       "FMU reads version %lu", (unsigned long)version, (unsigned long)SER_VERSION);
+        return 0;
+    }
+    total = get_u32(cu);
+    if (!cu->ok || total != cu->size) {
+        model_error(m, "fmi2DeSerializeFMUstate: %lu bytes given, the state says it has %lu "
+                       "(truncated or with trailing bytes)",
+                    (unsigned long)cu->size, (unsigned long)total);
+        return 0;
+    }
+    if (cu->size < 16) return deser_fail(m, "truncated data");
+    memcpy(&crc, cu->r + cu->size - 4, 4);
+    if (crc != crc32_update(0, cu->r, cu->size - 4))
+        return deser_fail(m, "the state is damaged (CRC-32 mismatch)");
+    cu->size -= 4; /* the payload ends before the CRC */
+
+    nid = get_u32(cu);
+    if (!cu->ok || nid != strlen(MODEL_IDENTIFIER_STRING))
+        return deser_fail(m, "the state was saved by another FMU (model identifier differs)");
+    get(cu, ident, nid);
+    if (!cu->ok || memcmp(ident, MODEL_IDENTIFIER_STRING, nid) != 0)
+        return deser_fail(m, "the state was saved by another FMU (model identifier differs)");
     nguid = get_u32(cu);
     if (!cu->ok || nguid != strlen(MODEL_GUID))
         return deser_fail(m, "the state was saved by another FMU (GUID differs)");
     get(cu, guid, nguid);
     if (!cu->ok || memcmp(guid, MODEL_GUID, nguid) != 0)
         return deser_fail(m, "the state was saved by another FMU (GUID differs)");
+    nr = get_u32(cu);
+    ni = get_u32(cu);
+    nb = get_u32(cu);
+    ns = get_u32(cu);
+    if (!cu->ok || nr != N_REAL || ni != N_INTEGER || nb != N_BOOLEAN || ns != N_STRING)
+        return deser_fail(m, "the state has other variable counts than this FMU");
 
     state = get_i32(cu);
     if (!cu->ok || !is_valid_state(state)) return deser_fail(m, "invalid instance state");
@@ -1297,12 +1461,13 @@ fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte serializedSta
     }
     cu.r = (const unsigned char *)serializedState;
     cu.size = size;
-    if (!read_snapshot(m, &cu, st)) {
-        snapshot_free_strings(st);
+    if (!read_snapshot(m, &cu, &st->p)) {
+        snapshot_free_strings(&st->p);
         free(st);
         return fmi2Error;
     }
-    st->magic = SNAPSHOT_MAGIC;
+    fill_header(&st->h);
+    seal(st);
     *FMUstate = (fmi2FMUstate)st;
     return fmi2OK;
 }
