@@ -128,17 +128,62 @@ def rest_threshold(window: int, p_false: float = P_FALSE_MOVING) -> float:
     return float(chi2.isf(p_false, 6 * window - 2)) / window
 
 
+def noise_floor(increments: np.ndarray, dt: float, window: int = 50, quantile: float = 0.01) -> tuple[float, float]:
+    """The record's own per-sample noise ``(sigma_a, sigma_g)`` (m/s2, rad/s): per window of
+    ``window`` samples the scatter of each triad about its mean over its ``3 (W - 1)`` degrees
+    of freedom, the ``quantile`` over the windows, divided by that quantile of the chi-square's
+    mean (unbiased when at least ``quantile`` of the windows are at rest or in quiet, steady
+    motion). 0 for exact (simulated ideal) data."""
+    from scipy.stats import chi2
+
+    inc = np.asarray(increments, dtype=float)
+    n = inc.shape[0]
+    lo = np.arange(0, n - window + 1, max(1, window // 2))
+    dof = 3 * (window - 1)
+    bias = float(chi2.ppf(quantile, dof)) / dof
+    out = []
+    for cols in (slice(3, 6), slice(0, 3)):
+        scatter, _ = _window_sums(inc[:, cols] / dt, window, lo)
+        out.append(math.sqrt(float(np.quantile(scatter / dof, quantile)) / bias))
+    return out[0], out[1]
+
+
+def speed_changes(increments: np.ndarray, dt: float, runs: np.ndarray, span: float) -> np.ndarray:
+    """Per candidate run ``[a, b)`` of detected rest the change of the body-forward speed
+    (m/s) over the ``span`` s before it and after it, ``(k, 2)``: the forward specific force
+    minus its mean over the run (the run's gravity along body x: at rest and at steady speed
+    alike the mean specific force is gravity's reaction), integrated over that span. A trolley comes to rest after a deceleration (< 0) and
+    leaves it with an acceleration (> 0); cruising at a steady speed looks like rest to the
+    GLRT but follows an acceleration or a curve, not a deceleration."""
+    fx = np.asarray(increments, dtype=float)[:, 3] / dt
+    n, m = fx.size, int(round(span / dt))
+    out = np.zeros((len(runs), 2))
+    for i, (a, b) in enumerate(runs):
+        ref = fx[a:b].mean()
+        lo, hi = max(0, a - m), min(n, b + m)  # quiet cruising inside adds ~0: no need to skip it
+        out[i] = (float((fx[lo:a] - ref).sum() * dt), float((fx[b:hi] - ref).sum() * dt))
+    return out
+
+
 def detect_stationary(increments: np.ndarray, dt: float, window: int = 50, threshold: float | None = None,
                       sigma_a: float = NAVIGATION_GRADE[0], sigma_g: float = NAVIGATION_GRADE[1],
                       gravity: float | None = None, min_samples: int = 100,
-                      earth_rate: float = earth.RATE) -> np.ndarray:
+                      earth_rate: float = earth.RATE, noise_from_data: bool = True,
+                      speed_change: float | None = 0.3, ramp_span: float = 6.0) -> np.ndarray:
     """Stationary samples of an IMU record (module docstring): ``increments`` ``(n, 6)``
     (``dtheta_x..z`` rad, ``dv_x..z`` m/s, each over the ``dt`` s before its sample), ``window``
     ``W`` samples, ``threshold`` ``gamma`` (default :func:`rest_threshold`), ``sigma_a`` (m/s2),
     ``sigma_g`` (rad/s) per sample (:func:`noise_sigmas`; default the navigation grade at
     200 Hz), ``gravity`` (m/s2; default the record's median window-mean specific force),
     ``min_samples``: runs of detection shorter than this are dropped, ``earth_rate`` (rad/s; 0
-    gives Skog et al.'s statistic). Returns a bool array ``(n,)``, True where ``T_k < gamma``."""
+    gives Skog et al.'s statistic). ``noise_from_data``: each sigma is at least the record's
+    own noise floor (:func:`noise_floor`), so the threshold sits relative to the data's noise
+    whatever the datasheet says. ``speed_change`` (m/s; None: off): a run of detection is
+    rest only if the body-forward speed changed by less than ``-speed_change`` over the
+    ``ramp_span`` s before it (or the record starts with it) and by more than ``+speed_change``
+    after it (or the record ends with it) (:func:`speed_changes`; the IMU's x axis forward in
+    the direction of travel): steady cruising on straight, smooth track is otherwise
+    indistinguishable from rest. Returns a bool array ``(n,)``."""
     inc = np.asarray(increments, dtype=float)
     if inc.ndim != 2 or inc.shape[1] != 6:
         raise ValueError(f"detect_stationary: increments of shape {inc.shape}, expected (n, 6)")
@@ -146,11 +191,21 @@ def detect_stationary(increments: np.ndarray, dt: float, window: int = 50, thres
         raise ValueError("detect_stationary: dt, sigma_a, sigma_g and gravity must be positive")
     if not 1 <= window <= inc.shape[0]:
         raise ValueError(f"detect_stationary: window {window} outside 1..{inc.shape[0]} samples")
+    if noise_from_data and window >= 2:
+        fa, fg = noise_floor(inc, dt, window)
+        sigma_a, sigma_g = max(sigma_a, fa), max(sigma_g, fg)
     gamma = rest_threshold(window) if threshold is None else float(threshold)
     still = shoe_statistic(inc, dt, window, sigma_a, sigma_g, gravity, earth_rate) < gamma
     if min_samples > 1:
         for a, b in _runs(still):
             if b - a < min_samples:
+                still[a:b] = False
+    if speed_change is not None:
+        runs = _runs(still)
+        dv = speed_changes(inc, dt, runs, ramp_span)
+        n = inc.shape[0]
+        for (a, b), (before, after) in zip(runs, dv):
+            if not ((a == 0 or before < -speed_change) and (b == n or after > speed_change)):
                 still[a:b] = False
     return still
 
