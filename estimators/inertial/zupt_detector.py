@@ -226,7 +226,7 @@ def detect_stationary(increments: np.ndarray, dt: float, window: int = 50, thres
                       gravity: float | None = None, min_samples: int = 100,
                       earth_rate: float = earth.RATE, noise_from_data: bool = True,
                       speed_change: float | None = 0.3, ramp_span: float = 6.0,
-                      trim: bool = True) -> np.ndarray:
+                      trim: bool = True, margin: int | None = None) -> np.ndarray:
     """Stationary samples of an IMU record (module docstring): ``increments`` ``(n, 6)``
     (``dtheta_x..z`` rad, ``dv_x..z`` m/s, each over the ``dt`` s before its sample), ``window``
     ``W`` samples, ``threshold`` ``gamma`` (default :func:`rest_threshold`), ``sigma_a`` (m/s2),
@@ -237,11 +237,13 @@ def detect_stationary(increments: np.ndarray, dt: float, window: int = 50, thres
     own noise floor (:func:`noise_floor`), so the threshold sits relative to the data's noise
     whatever the datasheet says. ``speed_change`` (m/s; None: off): a run of detection is
     rest only if the body-forward speed changed by less than ``-speed_change`` over the
-    ``ramp_span`` s before it (or it starts within ``W`` samples of the record's start) and by
-    more than ``+speed_change`` after it (or it ends within ``W`` of the record's end) (:func:`speed_changes`; the IMU's x axis forward in
+    ``ramp_span`` s before it (or it starts within ``2 W`` samples of the record's start) and by
+    more than ``+speed_change`` after it (or it ends within ``2 W`` of the record's end) (:func:`speed_changes`; the IMU's x axis forward in
     the direction of travel): steady cruising on straight, smooth track is otherwise
     indistinguishable from rest. ``trim``: each run of rest is then shrunk by
-    :func:`trim_to_rest`. Returns a bool array ``(n,)``."""
+    :func:`trim_to_rest`, and by ``margin`` samples at each end (default ``W``: 0.25 s of a
+    5 s stop; a ZUPT in the first samples of a ramp is a lie of many sigma, one lost at rest
+    costs nothing). Returns a bool array ``(n,)``."""
     inc = np.asarray(increments, dtype=float)
     if inc.ndim != 2 or inc.shape[1] != 6:
         raise ValueError(f"detect_stationary: increments of shape {inc.shape}, expected (n, 6)")
@@ -263,15 +265,22 @@ def detect_stationary(increments: np.ndarray, dt: float, window: int = 50, thres
         dv = speed_changes(inc, dt, runs, ramp_span)
         n = inc.shape[0]
         for (a, b), (before, after) in zip(runs, dv):
-            # within a window of the record's ends: the record starts or ends at rest (a
-            # first row of zero increments, the initial time's, shifts the first run by W/2)
-            if not ((a < window or before < -speed_change) and (b > n - window or after > speed_change)):
+            # within two windows of the record's ends: the record starts or ends at rest (a
+            # first row of zero increments, the initial time's, delays the first run by W)
+            if not ((a < 2 * window or before < -speed_change) and (b > n - 2 * window or after > speed_change)):
                 still[a:b] = False
     if trim:
         for a, b in _runs(still):
             lo, hi = trim_to_rest(inc, dt, a, b, window, sigma_a)
             still[a:lo] = False
             still[hi:b] = False
+    m = window if margin is None else int(margin)
+    if m > 0:
+        n = inc.shape[0]
+        for a, b in _runs(still):
+            lo, hi = (a if a < 2 * window else a + m), (b if b > n - 2 * window else b - m)
+            still[a:b] = False
+            still[lo:max(lo, hi)] = True
     return still
 
 
