@@ -37,7 +37,8 @@ INCREMENTS = tuple(output("imu", f"y_{k}") for k in range(1, 7))
 ROLES = {**{f"imu_{k}": r for k, r in enumerate(INCREMENTS, 1)}, "odometer": output("imu", "y_7"),
          "ref_lat": output("reference", "y_1"), "ref_lon": output("reference", "y_2"),
          "ref_height": output("reference", "y_3"), "ref_stopped": output("reference", "boolean_1"),
-         "reference_file": parameter("reference", "file"), "stopped_column": parameter("reference", "boolean_column_1")}
+         "reference_file": parameter("reference", "file"), "stopped_column": parameter("reference", "boolean_column_1"),
+         "odometer_column": parameter("imu", "column_7")}
 DEG = math.pi / 180.0
 
 _LAST: list = [None, None]  # (key, result): metrics, files and figures of one run share it
@@ -64,7 +65,9 @@ def _record(run: RunData) -> dict:
         ref = np.column_stack([np.asarray(s[r[k]])[rows] * f for k, f in (("ref_lat", DEG), ("ref_lon", DEG),
                                                                            ("ref_height", 1.0))])
         ref_ned = local_ned(*ref.T, origin)
-    distance = np.asarray(s[r["odometer"]])[rows] if obs.s["odometer"] else path_length(est_ned)
+    # the odometer's distance when imu.csv has one (aiding or not): the design's chainage; else
+    # the smoothed path length (a MEMS trajectory's is off by decimetres over 600 m)
+    distance = np.asarray(s[r["odometer"]])[rows] if str(r.get("odometer_column") or "") else path_length(est_ned)
     distance = np.maximum.accumulate(distance - distance[0])
     out = {"t": t, "distance": distance, "est": est_ned, "ref": ref_ned, "chords": None, "detector": {}}
     try:

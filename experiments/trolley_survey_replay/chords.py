@@ -4,8 +4,8 @@ sigma, and with reference positions the chord differences and their RMS.
 
 Positions are local NED (m) about the smoothed start (``ned_difference``: over a 600 m survey
 the flat-Earth form bends a 30 m chord's 5 m offset by 0.01 mm, the same for estimate and
-reference). Distance (m): the odometer when the smoother reads it, else the smoothed path
-length. Chord values: :func:`railfmu.estimators.inertial.chord_accuracy.chord_offsets`
+reference). Distance (m): the odometer column when imu.csv has one (``imu.column_7``), else
+the smoothed path length. Chord values: :func:`railfmu.estimators.inertial.chord_accuracy.chord_offsets`
 (alignment horizontal, level vertical; m): the track's irregularity plus its design's own chord
 offsets (a curve's versine). Prediction: :func:`~railfmu.estimators.inertial.chord_accuracy.survey_chords`
 on the smoother's joint error distribution (RMS of the max, and the pointwise sigma).
