@@ -83,7 +83,8 @@ def test_synthetic_rest_motion_rest_known_answer():
     track), 5 s at rest; navigation-grade noise. The motion is far above the noise, so a sample
     is detected exactly when its whole window (W = 50, samples k - 25 to k + 24) lies at rest:
     misses are the 24 samples before the motion and the 25 after it, and nothing else (with the
-    default threshold and gravity; the GLRT alone, without the speed-change rule and the trim)."""
+    default threshold and gravity; the GLRT alone, without the speed-change rule, the trim and
+    the margin)."""
     rng = np.random.default_rng(11)
     n = 4000
     inc = rest_increments(n, rng)
@@ -93,7 +94,7 @@ def test_synthetic_rest_motion_rest_known_answer():
     wave = np.cos(2 * np.pi * t[moving])[:, None] * DT
     inc[moving, :3] += 2e-3 * wave * np.array([0.0, 0.6, 0.8])
     inc[moving, 3:] += 0.05 * wave * np.array([1.0, 0.0, 0.0])
-    det = detect_stationary(inc, DT, speed_change=None, trim=False)  # the GLRT alone
+    det = detect_stationary(inc, DT, speed_change=None, trim=False, margin=0)  # the GLRT alone
     # the default wants a deceleration into a rest and an acceleration out of it: this motion
     # has no net speed change, so neither rest is one
     assert not detect_stationary(inc, DT).any()
@@ -131,12 +132,11 @@ def test_noise_sigmas_of_the_grades():
 @pytest.mark.skipif(shutil.which("gcc") is None or fmpy.platform != "linux64", reason="needs gcc on linux64")
 def test_detector_on_a_short_navigation_grade_survey(tmp_path, fmu_dir):
     """90 s of ``trolley_survey --variant navigation_grade`` (10 s rest, the 60 m run on straight
-    track, the stop at 60 m, the next start), defaults (W = 50, min_samples = 100) with the
-    grade's noise: both stops found, no false stop, no sample at rest missed; the few false
-    alarms are the stops' ends grown into the first and last samples of motion, where the
-    smooth speed ramp is still below 1e-5 m/s (measured: 0 misses, 5 false alarms at up to
-    1.6e-6 m/s). On the whole 700 s run: 0 misses, 87 false alarms within 9 samples of the 11
-    stops, no false stop."""
+    track, the stop at 60 m, the next start), defaults (W = 50, min_samples = 100, margin W)
+    with the grade's noise: both stops found, no false stop, no sample in motion taken for rest;
+    the misses are the margins (W samples off each end of a rest that is not the record's start
+    or end, plus the trim; measured 139). On the whole 700 s run: 918 misses, 0 false alarms,
+    no false stop (the GLRT alone: 0 misses, 87 false alarms within 9 samples of the stops)."""
     from railfmu.experiments.engine.runner import run_experiment
     out = tmp_path / "run"
     run_experiment("trolley_survey", "navigation_grade", out=out, stop_time=90.0, step_size=DT, master="container",
@@ -147,7 +147,7 @@ def test_detector_on_a_short_navigation_grade_survey(tmp_path, fmu_dir):
     det = detect_stationary(imu, DT, sigma_a=SA, sigma_g=SG)
     s = detector_scores(det, stopped)
     assert s["stops"] == 2 and s["missed_stops"] == 0 and s["false_stops"] == 0, s
-    assert s["misses"] <= 10 and s["false_alarms"] <= 20, s
+    assert s["misses"] <= 200 and s["false_alarms"] == 0, s
     speed = np.hypot(truth.vn, truth.ve).to_numpy()
     assert speed[det & ~stopped].max(initial=0.0) < 1e-5
 
