@@ -5,9 +5,10 @@
 positions, optional 0/1 ``stopped``); the offline observer ``smoother``
 (:class:`railfmu.estimators.inertial.aided_ins.AidedInsSmoother`, ``zupt_source="detector"``:
 the zero-velocity epochs from :func:`railfmu.estimators.inertial.zupt_detector.detect_stationary`)
-runs on the whole record. Variants: ``navigation_grade`` (default), ``tactical_grade``,
+runs on the whole record. Variants: ``example`` (default: the shipped files with their
+reference and odometer), ``navigation_grade`` (the SSD as it is), ``tactical_grade``,
 ``mems_grade`` (the smoother's noise model), ``odometer``, ``nhc`` (the NHC with a stated
-wheel-rail play), ``nhc_odometer``. Shipped: 80 s of a simulated ``trolley_survey`` run
+wheel-rail play), ``nhc_odometer``. Shipped: 85 s of a simulated ``trolley_survey`` run
 (``record.py``; ``resources/README.md``).
 
 Outputs: ``chords.csv`` and ``chords.png`` (:mod:`.chords`): per chord point the smoothed
@@ -100,7 +101,7 @@ def _detector(run: RunData, obs, rows) -> dict:
 
 class TrolleySurveyReplay(Study):
     """The aided survey on a replayed record: chords, their sigma, differences, detector scores."""
-    default_variant = "navigation_grade"
+    default_variant = "example"
     roles = ROLES
     figures_of_signals: dict = {}
     summary_metrics = ("chord_*_error_mm", "predicted_sigma_*_mm", "detector_*", "wall_time_s")

@@ -2,11 +2,11 @@
 ``imu.csv`` with the odometer (``odometer_m``, from signals.csv), ``start.csv`` (the truth's
 first position and heading, roll and pitch levelled from the IMU: what a surveyor knows) and
 ``reference.csv`` (the simulated truth's position and stopped flag, every ``--every``-th row: a
-total station's stand-in). Shipped example: the first 80 s of ``trolley_survey --variant
+total station's stand-in). Shipped example: the first 85 s of ``trolley_survey --variant
 navigation_grade --seed 1``, the reference at 10 Hz.
 
     python -m railfmu.experiments.trolley_survey_replay.record [--from RUN] [--to DIR]
-        [--duration 80] [--every 20] [--digits 10]
+        [--duration 85] [--every 20] [--digits 10]
 """
 
 from __future__ import annotations
@@ -49,7 +49,7 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--from", dest="run", type=Path, default=None)
     ap.add_argument("--to", type=Path, default=RESOURCES)
-    ap.add_argument("--duration", type=float, default=80.0)
+    ap.add_argument("--duration", type=float, default=85.0)
     ap.add_argument("--every", type=int, default=20)
     ap.add_argument("--digits", type=int, default=10)
     args = ap.parse_args(argv)
