@@ -35,9 +35,9 @@ def _replay_against_simulated(tmp_path, grade, stop_time):
     prepare(tmp_path / "sim", tmp_path / "files")
     f = tmp_path / "files"
     rep = _run("trolley_survey_replay", grade, tmp_path / "replay",
-               sets={"imu.file": str(f / "imu.csv"), "start.file": str(f / "start.csv"),
-                     "reference.file": str(f / "reference.csv"), "reference.boolean_column_1": "stopped",
-                     "imu.column_7": "odometer_m"})
+               sets={"imu": {"file": str(f / "imu.csv"), "column_7": "odometer_m"},
+                     "start": {"file": str(f / "start.csv")},
+                     "reference": {"file": str(f / "reference.csv"), "boolean_column_1": "stopped"}})
     return sim, rep
 
 
