@@ -34,7 +34,7 @@ def test_profile_crlf_blank_and_long_lines_read_as_the_plain_file(fmu_dir, tmp_p
 
 
 @pytest.mark.parametrize("text, message", [
-    ("", ":1: header must be s,alignment,vertical_left,vertical_right"),
+    ("", ":1: header must be s,alignment,vertical_left,vertical_right or position_m,vertical_left_m,vertical_right_m"),
     (PROFILE.replace("10,1e-3", "10,0x1p-10"), ":3: not a number: '0x1p-10'"),
 ])
 def test_bad_profile_same_words_in_both_readers_and_python(fmu_dir, tmp_path, text, message):

@@ -17,6 +17,7 @@ from railfmu.estimators.inertial.zupt_detector import (
     NAVIGATION_GRADE,
     detect_stationary,
     detector_scores,
+    noise_floor,
     noise_sigmas,
     rest_threshold,
     shoe_statistic,
@@ -82,7 +83,8 @@ def test_synthetic_rest_motion_rest_known_answer():
     track), 5 s at rest; navigation-grade noise. The motion is far above the noise, so a sample
     is detected exactly when its whole window (W = 50, samples k - 25 to k + 24) lies at rest:
     misses are the 24 samples before the motion and the 25 after it, and nothing else (with the
-    default threshold and gravity)."""
+    default threshold and gravity; the GLRT alone, without the speed-change rule, the trim and
+    the margin)."""
     rng = np.random.default_rng(11)
     n = 4000
     inc = rest_increments(n, rng)
@@ -92,7 +94,10 @@ def test_synthetic_rest_motion_rest_known_answer():
     wave = np.cos(2 * np.pi * t[moving])[:, None] * DT
     inc[moving, :3] += 2e-3 * wave * np.array([0.0, 0.6, 0.8])
     inc[moving, 3:] += 0.05 * wave * np.array([1.0, 0.0, 0.0])
-    det = detect_stationary(inc, DT)
+    det = detect_stationary(inc, DT, speed_change=None, trim=False, margin=0)  # the GLRT alone
+    # the default wants a deceleration into a rest and an acceleration out of it: this motion
+    # has no net speed change, so neither rest is one
+    assert not detect_stationary(inc, DT).any()
     expected = np.zeros(n, bool)
     expected[:1000 - 24] = True
     expected[3000 + 25:] = True
@@ -127,12 +132,11 @@ def test_noise_sigmas_of_the_grades():
 @pytest.mark.skipif(shutil.which("gcc") is None or fmpy.platform != "linux64", reason="needs gcc on linux64")
 def test_detector_on_a_short_navigation_grade_survey(tmp_path, fmu_dir):
     """90 s of ``trolley_survey --variant navigation_grade`` (10 s rest, the 60 m run on straight
-    track, the stop at 60 m, the next start), defaults (W = 50, min_samples = 100) with the
-    grade's noise: both stops found, no false stop, no sample at rest missed; the few false
-    alarms are the stops' ends grown into the first and last samples of motion, where the
-    smooth speed ramp is still below 1e-5 m/s (measured: 0 misses, 5 false alarms at up to
-    1.6e-6 m/s). On the whole 700 s run: 0 misses, 87 false alarms within 9 samples of the 11
-    stops, no false stop."""
+    track, the stop at 60 m, the next start), defaults (W = 50, min_samples = 100, margin W)
+    with the grade's noise: both stops found, no false stop, no sample in motion taken for rest;
+    the misses are the margins (W samples off each end of a rest that is not the record's start
+    or end, plus the trim; measured 139). On the whole 700 s run: 918 misses, 0 false alarms,
+    no false stop (the GLRT alone: 0 misses, 87 false alarms within 9 samples of the stops)."""
     from railfmu.experiments.engine.runner import run_experiment
     out = tmp_path / "run"
     run_experiment("trolley_survey", "navigation_grade", out=out, stop_time=90.0, step_size=DT, master="container",
@@ -143,6 +147,56 @@ def test_detector_on_a_short_navigation_grade_survey(tmp_path, fmu_dir):
     det = detect_stationary(imu, DT, sigma_a=SA, sigma_g=SG)
     s = detector_scores(det, stopped)
     assert s["stops"] == 2 and s["missed_stops"] == 0 and s["false_stops"] == 0, s
-    assert s["misses"] <= 10 and s["false_alarms"] <= 20, s
+    assert s["misses"] <= 200 and s["false_alarms"] == 0, s
     speed = np.hypot(truth.vn, truth.ve).to_numpy()
     assert speed[det & ~stopped].max(initial=0.0) < 1e-5
+
+
+def stop_go_increments(rng, sigma_a, sigma_g, rest=10.0, ramp=4.0, cruise=40.0, speed=1.0):
+    """A trolley on straight, level, smooth track: rest, a sin^2 speed ramp to ``speed``,
+    steady cruising (no acceleration, no rotation: to an IMU the same as rest), a ramp down,
+    rest; body level, heading 0, 30.5 deg N, white noise of sigma_a, sigma_g per sample.
+    Returns (increments (n, 6), stopped (n,))."""
+    t_ramp = np.arange(0.0, ramp, DT)
+    a = speed * 2.0 / ramp * np.sin(np.pi * t_ramp / ramp) ** 2
+    fx = np.concatenate([np.zeros(int(rest / DT)), a, np.zeros(int(cruise / DT)), -a, np.zeros(int(rest / DT))])
+    n = fx.size
+    stopped = np.zeros(n, bool)
+    stopped[:int(rest / DT)] = True
+    stopped[n - int(rest / DT):] = True
+    w = earth.earth_rate_n(math.radians(30.5))
+    f = np.column_stack([fx, np.zeros(n), np.full(n, -G)])
+    inc = np.column_stack([(w + rng.normal(0, sigma_g, (n, 3))) * DT, (f + rng.normal(0, sigma_a, (n, 3))) * DT])
+    return inc, stopped
+
+
+@pytest.mark.parametrize("grade", ["navigation_grade", "tactical_grade", "mems_grade"])
+def test_steady_cruise_on_straight_smooth_track_is_not_rest(grade):
+    """Cruising at 1 m/s on straight, smooth track is rest to the GLRT (the 40 s of cruise go
+    for rest: false stops); the default's speed-change rule rejects it and keeps both rests
+    (the stop after a deceleration, the start before an acceleration), and the trim keeps the
+    stops' growth into the ramps within 0.4 s (80 samples, the MEMS grade: measured 42 and 59;
+    the ramp's speed after 0.4 s is 6 mm/s; without the trim about 100)."""
+    sa, sg = noise_sigmas(GRADES[grade], DT)
+    inc, stopped = stop_go_increments(np.random.default_rng(3), sa, sg)
+    glrt = detector_scores(detect_stationary(inc, DT, sigma_a=sa, sigma_g=sg, speed_change=None, trim=False), stopped)
+    assert glrt["false_stops"] >= 1 and glrt["false_alarms"] > 7000, glrt
+    s = detector_scores(detect_stationary(inc, DT, sigma_a=sa, sigma_g=sg), stopped)
+    assert s["missed_stops"] == 0 and s["false_stops"] == 0, s
+    assert s["early_samples"] <= 80 and s["late_samples"] <= 80, s
+    assert s["misses"] <= 100, s
+
+
+def test_noise_floor_is_the_records_own_noise():
+    """The record's noise floor (a low quantile of the window scatter, de-biased) is its
+    white noise to 5 % on a record that is half motion, and the detector's sigmas follow it
+    when the given ones are lower: a record 3 times noisier than the navigation grade still
+    has both rests found (with the grade's sigmas alone every window would be motion)."""
+    sa, sg = noise_sigmas(GRADES["navigation_grade"], DT)
+    inc, stopped = stop_go_increments(np.random.default_rng(4), 3 * sa, 3 * sg)
+    fa, fg = noise_floor(inc, DT)
+    assert fa == pytest.approx(3 * sa, rel=0.05) and fg == pytest.approx(3 * sg, rel=0.05)
+    s = detector_scores(detect_stationary(inc, DT, sigma_a=sa, sigma_g=sg), stopped)
+    assert s["missed_stops"] == 0 and s["false_stops"] == 0 and s["misses"] <= 100, s
+    off = detector_scores(detect_stationary(inc, DT, sigma_a=sa, sigma_g=sg, noise_from_data=False), stopped)
+    assert off["missed_stops"] == 2, off

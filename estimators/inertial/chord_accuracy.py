@@ -243,6 +243,18 @@ def _along_chords(grid: ChordGrid, q):
     return ((y[..., :n] - y[..., n_off:]).reshape(shape), (z[..., :n] - z[..., n_off:]).reshape(shape))
 
 
+def chord_offsets(grid: ChordGrid, positions) -> tuple[np.ndarray, np.ndarray]:
+    """The chord measurement itself (alignment, level; m) of every chord point of a surveyed
+    trajectory: ``d_s - d_{s+o}`` against each chord (eq. 14), ``positions`` (..., n_grid, 3)
+    NED (m) at the grid samples. On a measured record it is the track's irregularity plus its
+    design's own chord offsets (a curve's versine); :func:`chord_errors` is its difference
+    between an estimate and a reference."""
+    q = np.asarray(positions, dtype=float)
+    if q.shape[-2:] != (grid.distance.size, 3):
+        raise ValueError(f"positions {q.shape} must be (..., {grid.distance.size}, 3)")
+    return _along_chords(grid, q)
+
+
 def chord_error_jacobian(grid: ChordGrid, true_positions, step: float = 1e-4) -> np.ndarray:
     """The linearised map (the covariance map): ``J`` (2, n_points, 4, 3) with
     ``Delta[c, n] ~= sum_{u, i} J[c, n, u, i] e[grid.index[u, n], i]`` (c: alignment, level;

@@ -35,31 +35,42 @@ trolley is level to a percent and its accelerations are milli-g: the median is g
 the bias and scale factor along it).
 
 Defaults, chosen on the trolley survey (``railfmu run trolley_survey``, 700 s, 11 stops of
-5 s, navigation grade): ``W = 50`` (0.25 s) and ``min_samples = 100`` (runs of detection
-shorter than 0.5 s are dropped). What the detector confuses: a trolley cruising at 1 m/s on
-straight, level track feels no acceleration and no rotation, exactly as at rest; only the
-track's curvature and irregularities (angular rates 1e-4 to 3e-3 rad/s) and the speed ramps
-tell motion from rest, and a short window on a smooth stretch does not (``W = 20`` without the
-minimum run: 19 false stops of up to 0.2 s at full speed). The ramp ``a(tau) = a_max
-sin^2(pi tau / T)`` starts below the noise, so the detected stops grow into the first and last
-samples of motion (at most 6 and 9 samples, 9.4e-6 m/s); a longer window shrinks them into the
-stops instead (``W = 100``: 402 samples at rest missed, no false alarm). Measured with the
-defaults and each grade's noise, samples (of 12,010 at rest, 127,990 moving) and runs:
+5 s): ``W = 50`` (0.25 s) and ``min_samples = 100`` (runs of detection shorter than 0.5 s are
+dropped). What the GLRT alone confuses: a trolley cruising at 1 m/s on straight, level track
+feels no acceleration and no rotation, exactly as at rest, and a horizontal acceleration changes
+``|f|`` by only ``a^2 / 2g``. Alone (``speed_change=None, trim=False``, the grade's sigmas,
+the global median gravity) it gave, samples of 12,010 at rest and 127,990 moving, and runs:
+navigation grade 0 misses / 87 false alarms / 0 false stops, tactical 2351 / 9747 / 47, MEMS
+0 / 54,878 / 109; on the straight, smooth ``trolley_straight_30m.csv`` (``paper_montecarlo``)
+it took 5,873 of 6,079 moving samples for rest and the smoother's chords were off by
+decimetres. Five additions, each on by default, make it work on both shipped tracks:
 
-    grade        misses  false alarms  missed stops  false stops
-    navigation        0            87             0            0
-    tactical       2351          9747             0           47
-    MEMS              0         54878             0          109
+* runs of detection less than ``W`` apart are one (a chance exceedance splits a stop);
+* the noise floor (:func:`noise_floor`): each sigma is at least the record's own (a low
+  quantile of the window scatter), so the threshold sits relative to the data's noise;
+* the running gravity (:func:`_local_gravity`): a 60 s running median of ``|mean f|``, not
+  the record's (a tactical-grade 1 mg Gauss-Markov bias drifts ~0.5 mg over the survey);
+* the speed-change rule (:func:`speed_changes`, ``speed_change = 0.3`` m/s over
+  ``ramp_span = 6`` s): a run is rest only after a deceleration and before an acceleration
+  (or at the record's ends), which steady cruising is not (the IMU's x forward);
+* the trim (:func:`trim_to_rest`): each run ends where the specific force's direction leaves
+  the run's own, which shows a speed ramp long before the GLRT's magnitude test; then a
+  ``margin`` of ``W`` samples off each end (not at the record's ends).
 
-For the tactical and MEMS grades (gyro noise 5e-4 and 1.2e-3 rad/s per sample) the cruising
-trolley is within the noise on the straight parts of the track: the detector there is no
-substitute for the ``stopped`` flag (``W = 200`` with ``min_samples = 200``: tactical 214 false
-alarms and 1 false stop, MEMS 33,155 and 46). The plain statistic of Skog et al. with ``g =
-9.8``, ``W = 20`` and the chi-square threshold misses every stop at the navigation grade.
-On a perfectly straight, level track without irregularities (the trolley survey's
-``paper_montecarlo``) cruising is rest for any IMU: there the detector took 77 % of the moving
-samples for rest (5,222 of 6,799, navigation grade) and the smoother's chords were off by
-decimetres; use the flag.
+Measured with the defaults and each grade's sigmas (``trolley_survey --seed 1``, the stopped
+flag as truth, samples of 12,011 at rest and 127,990 moving; ``tests/test_zupt_detector.py``
+repeats the straight-track case per grade on a synthetic stop-and-go record):
+
+    track / grade                    misses  false alarms  missed stops  false stops
+    trolley_track, navigation           918             0             0            0
+    trolley_track, tactical             435             0             0            0
+    trolley_track, MEMS                 441             0             0            0
+    trolley_straight_30m, navigation     96             0             1            0
+
+The misses are the margins and the trim (before them the stops grew up to 11 samples into the
+ramps at the navigation grade, 49 at the tactical and MEMS grades: speeds to 4 mm/s, which a
+ZUPT of 0.1 mm/s takes as 40 sigma). The straight track's missed stop is its 0.1 s initial
+rest, shorter than ``min_samples`` (of 222 samples at rest, 31.5 s).
 """
 
 from __future__ import annotations
@@ -104,18 +115,38 @@ def _window_sums(x: np.ndarray, window: int, lo: np.ndarray) -> tuple[np.ndarray
     return np.maximum(scatter, 0.0), total / window + c
 
 
+#: span (s) of the running median that gives the gravity the accelerometers read
+GRAVITY_SPAN = 60.0
+
+
+def _local_gravity(norm_f: np.ndarray, dt: float, window: int) -> np.ndarray | float:
+    """What the accelerometers read for gravity about each sample: the running median over
+    :data:`GRAVITY_SPAN` of the window-mean ``|f|`` (every ``W/2``-th window; a record shorter
+    than the span: its median). Running, not global: a tactical-grade accelerometer's 1 mg
+    Gauss-Markov bias moves ``|f|`` by ~0.5 mg over a 700 s survey, 1.1 on ``T`` at the ends."""
+    n = norm_f.size
+    step = max(1, window // 2)
+    span = int(round(GRAVITY_SPAN / dt / step))
+    coarse = norm_f[::step]
+    if coarse.size <= span:
+        return float(np.median(norm_f))
+    from scipy.ndimage import median_filter
+    med = median_filter(coarse, size=span | 1, mode="nearest")
+    return np.interp(np.arange(n), np.arange(coarse.size) * step, med)
+
+
 def shoe_statistic(increments: np.ndarray, dt: float, window: int, sigma_a: float, sigma_g: float,
                    gravity: float | None = None, earth_rate: float = earth.RATE) -> np.ndarray:
     """``T_k`` of the module docstring for each row of ``increments`` ``(n, 6)`` (``dtheta_x..z``
     rad, ``dv_x..z`` m/s over ``dt`` s), window centred on ``k``; ``(n,)``. ``gravity`` None:
-    the median over the windows of ``|mean f|``."""
+    the running median over the windows of ``|mean f|`` (:func:`_local_gravity`)."""
     inc = np.asarray(increments, dtype=float)
     n = inc.shape[0]
     lo = np.clip(np.arange(n) - window // 2, 0, n - window)   # first sample of k's window
     scatter_f, mean_f = _window_sums(inc[:, 3:] / dt, window, lo)
     scatter_w, mean_w = _window_sums(inc[:, :3] / dt, window, lo)
     norm_f = np.linalg.norm(mean_f, axis=1)
-    g = float(np.median(norm_f)) if gravity is None else float(gravity)
+    g = _local_gravity(norm_f, dt, window) if gravity is None else float(gravity)
     accel = scatter_f + window * (norm_f - g) ** 2
     gyro = scatter_w + window * (np.linalg.norm(mean_w, axis=1) - earth_rate) ** 2
     return (accel / sigma_a ** 2 + gyro / sigma_g ** 2) / window
@@ -128,17 +159,92 @@ def rest_threshold(window: int, p_false: float = P_FALSE_MOVING) -> float:
     return float(chi2.isf(p_false, 6 * window - 2)) / window
 
 
+def noise_floor(increments: np.ndarray, dt: float, window: int = 50, quantile: float = 0.01) -> tuple[float, float]:
+    """The record's own per-sample noise ``(sigma_a, sigma_g)`` (m/s2, rad/s): per window of
+    ``window`` samples the scatter of each triad about its mean over its ``3 (W - 1)`` degrees
+    of freedom, the ``quantile`` over the windows, divided by that quantile of the chi-square's
+    mean (unbiased when at least ``quantile`` of the windows are at rest or in quiet, steady
+    motion). 0 for exact (simulated ideal) data."""
+    from scipy.stats import chi2
+
+    inc = np.asarray(increments, dtype=float)
+    n = inc.shape[0]
+    lo = np.arange(0, n - window + 1, max(1, window // 2))
+    dof = 3 * (window - 1)
+    bias = float(chi2.ppf(quantile, dof)) / dof
+    out = []
+    for cols in (slice(3, 6), slice(0, 3)):
+        scatter, _ = _window_sums(inc[:, cols] / dt, window, lo)
+        out.append(math.sqrt(float(np.quantile(scatter / dof, quantile)) / bias))
+    return out[0], out[1]
+
+
+def speed_changes(increments: np.ndarray, dt: float, runs: np.ndarray, span: float) -> np.ndarray:
+    """Per candidate run ``[a, b)`` of detected rest the change of the body-forward speed
+    (m/s) over the ``span`` s before it and after it, ``(k, 2)``: the forward specific force
+    minus its mean over the run (the run's gravity along body x: at rest and at steady speed
+    alike the mean specific force is gravity's reaction), integrated over that span. A trolley comes to rest after a deceleration (< 0) and
+    leaves it with an acceleration (> 0); cruising at a steady speed looks like rest to the
+    GLRT but follows an acceleration or a curve, not a deceleration."""
+    fx = np.asarray(increments, dtype=float)[:, 3] / dt
+    n, m = fx.size, int(round(span / dt))
+    out = np.zeros((len(runs), 2))
+    for i, (a, b) in enumerate(runs):
+        ref = fx[a:b].mean()
+        lo, hi = max(0, a - m), min(n, b + m)  # quiet cruising inside adds ~0: no need to skip it
+        out[i] = (float((fx[lo:a] - ref).sum() * dt), float((fx[b:hi] - ref).sum() * dt))
+    return out
+
+
+def trim_to_rest(increments: np.ndarray, dt: float, a: int, b: int, window: int, sigma_a: float,
+                 p_false: float = 1e-6) -> tuple[int, int]:
+    """Shrink a run of rest ``[a, b)`` to where the specific force stays at the run's own
+    (gravity's): from the run's middle outwards, up to the first centred window of ``window``
+    samples whose mean specific force departs from the mean of the run's middle half by more
+    than chance (``W |d|^2 / sigma_a^2`` over the chi-square's ``1 - p_false`` quantile, 3
+    degrees of freedom). The GLRT tests the magnitude of the specific force, to which a
+    horizontal acceleration adds only ``a^2 / 2g``: a noisy IMU's GLRT takes the first half
+    second of a smooth speed ramp for rest (the MEMS grade: 100 samples, up to 1.2 cm/s at
+    0.5 m/s2); its direction shows the ramp within a fifth of a second."""
+    from scipy.stats import chi2
+
+    f = np.asarray(increments[a:b, 3:], dtype=float) / dt
+    n = b - a
+    if n < 2 * window:
+        return a, b
+    ref = f[n // 4: n - n // 4].mean(axis=0)
+    c = np.concatenate([np.zeros((1, 3)), np.cumsum(f - ref, axis=0)])
+    d = (c[window:] - c[:-window]) / window            # window starting at j, centre j + W/2
+    stat = window * np.einsum("ij,ij->i", d, d) / sigma_a ** 2
+    out = np.flatnonzero(stat > chi2.isf(p_false, 3)) + window // 2   # centres
+    mid = n // 2
+    above, below = out[out > mid], out[out < mid]
+    return a + (int(below[-1]) + 1 if below.size else 0), a + (int(above[0]) if above.size else n)
+
+
 def detect_stationary(increments: np.ndarray, dt: float, window: int = 50, threshold: float | None = None,
                       sigma_a: float = NAVIGATION_GRADE[0], sigma_g: float = NAVIGATION_GRADE[1],
                       gravity: float | None = None, min_samples: int = 100,
-                      earth_rate: float = earth.RATE) -> np.ndarray:
+                      earth_rate: float = earth.RATE, noise_from_data: bool = True,
+                      speed_change: float | None = 0.3, ramp_span: float = 6.0,
+                      trim: bool = True, margin: int | None = None) -> np.ndarray:
     """Stationary samples of an IMU record (module docstring): ``increments`` ``(n, 6)``
     (``dtheta_x..z`` rad, ``dv_x..z`` m/s, each over the ``dt`` s before its sample), ``window``
     ``W`` samples, ``threshold`` ``gamma`` (default :func:`rest_threshold`), ``sigma_a`` (m/s2),
     ``sigma_g`` (rad/s) per sample (:func:`noise_sigmas`; default the navigation grade at
     200 Hz), ``gravity`` (m/s2; default the record's median window-mean specific force),
     ``min_samples``: runs of detection shorter than this are dropped, ``earth_rate`` (rad/s; 0
-    gives Skog et al.'s statistic). Returns a bool array ``(n,)``, True where ``T_k < gamma``."""
+    gives Skog et al.'s statistic). ``noise_from_data``: each sigma is at least the record's
+    own noise floor (:func:`noise_floor`), so the threshold sits relative to the data's noise
+    whatever the datasheet says. ``speed_change`` (m/s; None: off): a run of detection is
+    rest only if the body-forward speed changed by less than ``-speed_change`` over the
+    ``ramp_span`` s before it (or it starts within ``2 W`` samples of the record's start) and by
+    more than ``+speed_change`` after it (or it ends within ``2 W`` of the record's end) (:func:`speed_changes`; the IMU's x axis forward in
+    the direction of travel): steady cruising on straight, smooth track is otherwise
+    indistinguishable from rest. ``trim``: each run of rest is then shrunk by
+    :func:`trim_to_rest`, and by ``margin`` samples at each end (default ``W``: 0.25 s of a
+    5 s stop; a ZUPT in the first samples of a ramp is a lie of many sigma, one lost at rest
+    costs nothing). Returns a bool array ``(n,)``."""
     inc = np.asarray(increments, dtype=float)
     if inc.ndim != 2 or inc.shape[1] != 6:
         raise ValueError(f"detect_stationary: increments of shape {inc.shape}, expected (n, 6)")
@@ -146,12 +252,45 @@ def detect_stationary(increments: np.ndarray, dt: float, window: int = 50, thres
         raise ValueError("detect_stationary: dt, sigma_a, sigma_g and gravity must be positive")
     if not 1 <= window <= inc.shape[0]:
         raise ValueError(f"detect_stationary: window {window} outside 1..{inc.shape[0]} samples")
+    if noise_from_data and window >= 2:
+        fa, fg = noise_floor(inc, dt, window)
+        sigma_a, sigma_g = max(sigma_a, fa), max(sigma_g, fg)
     gamma = rest_threshold(window) if threshold is None else float(threshold)
     still = shoe_statistic(inc, dt, window, sigma_a, sigma_g, gravity, earth_rate) < gamma
+    runs = _runs(still)
+    for (_, b), (a, _) in zip(runs[:-1], runs[1:]):
+        if a - b < window:  # a chance exceedance inside a rest (1e-4 per window): not motion
+            still[b:a] = True
     if min_samples > 1:
         for a, b in _runs(still):
             if b - a < min_samples:
                 still[a:b] = False
+    if speed_change is not None:
+        runs = _runs(still)
+        dv = speed_changes(inc, dt, runs, ramp_span)
+        n = inc.shape[0]
+        span = round(ramp_span / dt)
+        for (a, b), (before, after) in zip(runs, dv):
+            # within two windows of the record's ends: the record starts or ends at rest (a
+            # first row of zero increments, the initial time's, delays the first run by W);
+            # a span cut short by an end: the threshold in proportion (a record ending 1 s
+            # into the start ramp has seen 0.09 of its 1 m/s)
+            need_b = speed_change * min(1.0, a / span)
+            need_a = speed_change * min(1.0, (n - b) / span)
+            if not ((a < 2 * window or before < -need_b) and (b > n - 2 * window or after > need_a)):
+                still[a:b] = False
+    if trim:
+        for a, b in _runs(still):
+            lo, hi = trim_to_rest(inc, dt, a, b, window, sigma_a)
+            still[a:lo] = False
+            still[hi:b] = False
+    m = window if margin is None else int(margin)
+    if m > 0:
+        n = inc.shape[0]
+        for a, b in _runs(still):
+            lo, hi = (a if a < 2 * window else a + m), (b if b > n - 2 * window else b - m)
+            still[a:b] = False
+            still[lo:max(lo, hi)] = True
     return still
 
 

@@ -88,7 +88,8 @@ Deterministic components (all components add up)
   step is ignored);
 * measured profile: a CSV file ``profile_file`` with the header line
   ``s,alignment,vertical_left,vertical_right`` (metres, ``s`` strictly increasing, at least
-  two rows) times ``profile_scale``, interpolated by cubic Hermite splines with Catmull-Rom
+  two rows), or a recording car's rail heights ``position_m,vertical_left_m,vertical_right_m``
+  (the alignment 0) times ``profile_scale``, interpolated by cubic Hermite splines with Catmull-Rom
   slopes (central differences ``(y[i+1] - y[i-1]) / (s[i+1] - s[i-1])``, one-sided at both
   ends); outside ``[s[0], s[-1]]`` it contributes 0. In the FMU a relative path is resolved
   against the FMU's ``resources/`` folder.
@@ -414,6 +415,8 @@ def run_in_weight(s, length: float) -> tuple[np.ndarray, np.ndarray]:
 # ---- measured profile table ----------------------------------------------------------------
 
 PROFILE_HEADER = ("s", "alignment", "vertical_left", "vertical_right")
+#: a recording car's rail heights by position (m): the same table with alignment 0
+CAR_HEADER = ("position_m", "vertical_left_m", "vertical_right_m")
 _NUMBER_CHARS = re.compile(r"^[0-9eE.+-]+$")
 
 
@@ -453,14 +456,17 @@ class ProfileTable:
             raise ValueError(f"profile_file {path}: cannot open ({e.strerror})") from None
         rows = []
         lines = text.splitlines()
-        if not lines or tuple(f.strip() for f in lines[0].split(",")) != PROFILE_HEADER:
-            raise ValueError(f"profile_file {path}:1: header must be {','.join(PROFILE_HEADER)}")
+        header = tuple(f.strip() for f in lines[0].split(",")) if lines else ()
+        if header not in (PROFILE_HEADER, CAR_HEADER):
+            raise ValueError(f"profile_file {path}:1: header must be {','.join(PROFILE_HEADER)} or "
+                             f"{','.join(CAR_HEADER)}")
+        ncol = len(header)
         for no, line in enumerate(lines[1:], start=2):
             if not line.strip():
                 continue
             fields = [f.strip() for f in line.split(",")]
-            if len(fields) != 4:
-                raise ValueError(f"profile_file {path}:{no}: expected 4 comma-separated numbers")
+            if len(fields) != ncol:
+                raise ValueError(f"profile_file {path}:{no}: expected {ncol} comma-separated numbers")
             row = []
             for f in fields:  # the C accepts what strtod reads fully, from these characters
                 x = float(f) if _NUMBER_CHARS.match(f) and _is_float(f) else math.nan
@@ -474,6 +480,8 @@ class ProfileTable:
         if len(rows) < 2:
             raise ValueError(f"profile_file {path}: needs at least two data rows")
         a = np.array(rows)
+        if ncol == 3:  # no alignment column: 0
+            a = np.column_stack([a[:, 0], np.zeros(len(a)), a[:, 1:]])
         return cls(a[:, 0], a[:, 1:].T)
 
     def __call__(self, s) -> tuple[np.ndarray, np.ndarray]:

@@ -1,6 +1,7 @@
 /* ProfileTable: a measured irregularity profile, s,alignment,vertical_left,vertical_right
  * (TrackIrregularity's profile_file, Trolley's irregularity_file), with its Catmull-Rom
- * slopes. railfmu.models.track.irregularity.ProfileTable.from_csv is the Python twin: it
+ * slopes; or a recording car's rail heights position_m,vertical_left_m,vertical_right_m
+ * (alignment 0). railfmu.models.track.irregularity.ProfileTable.from_csv is the Python twin: it
  * words the errors, so they keep the "file:line:" form. Each model evaluates the table its
  * own way. Included (static) by TrackIrregularity.c and TrackGeometry.h.
  */
@@ -29,19 +30,26 @@ static void profile_free(ProfileTable *p) {
 /* Reads file into p (empty before); 1 after one model_error. label: the parameter. */
 static int profile_read(ModelInstance *m, const char *label, const char *file, ProfileTable *p) {
     static const char *const header[4] = {"s", "alignment", "vertical_left", "vertical_right"};
+    static const char *const car[3] = {"position_m", "vertical_left_m", "vertical_right_m"};
     CsvTable t;
     size_t cap = 0, n = 0, i;
-    int c, rc;
+    int c, rc, ncol = 4, skip = 0; /* skip: the alignment column is absent (set to 0) */
     if (csv_open(&t, m, label, file, CSV_COLON)) return 1;
     for (c = 0; c < 4 && t.ncol == 4; c++)
         if (strcmp(t.header[c], header[c]) != 0) break;
-    if (t.ncol != 4 || c != 4) {
-        csv_fail(&t, 1, 0, "header must be s,alignment,vertical_left,vertical_right");
+    if (t.ncol == 3) {
+        for (c = 0; c < 3; c++)
+            if (strcmp(t.header[c], car[c]) != 0) break;
+        if (c == 3) c = 4, ncol = 3, skip = 1;
+    }
+    if (c != 4 || t.ncol != (size_t)ncol) {
+        csv_fail(&t, 1, 0, "header must be s,alignment,vertical_left,vertical_right or "
+                 "position_m,vertical_left_m,vertical_right_m");
         goto fail;
     }
     while ((rc = csv_next_row(&t)) > 0) {
-        if (t.ncell != 4) {
-            csv_fail(&t, t.line, 0, "expected 4 comma-separated numbers");
+        if (t.ncell != (size_t)ncol) {
+            csv_fail(&t, t.line, 0, "expected %d comma-separated numbers", ncol);
             goto fail;
         }
         if (n == cap) {
@@ -56,14 +64,15 @@ static int profile_read(ModelInstance *m, const char *label, const char *file, P
             p->y = b;
             cap = nc;
         }
-        for (c = 0; c < 4; c++) {
+        if (skip) p->y[3 * n] = 0.0;
+        for (c = 0; c < ncol; c++) {
             double x;
             if (csv_number(t.cell[c], &x) != CSV_OK) {
                 csv_fail(&t, t.line, 0, "not a number: '%s'", t.cell[c]);
                 goto fail;
             }
             if (c == 0) p->s[n] = x;
-            else p->y[3 * n + c - 1] = x;
+            else p->y[3 * n + c - 1 + skip] = x;
         }
         if (n > 0 && !(p->s[n] > p->s[n - 1])) {
             csv_fail(&t, t.line, 0, "s = %g is not greater than the previous s = %g", p->s[n], p->s[n - 1]);
