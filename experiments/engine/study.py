@@ -7,6 +7,8 @@ libraries with their own state); a local cluster by default, or the scheduler at
 
 ``--runs N`` is the Monte Carlo: each variant runs with seeds S, S+1, ..., S+N-1 (``--seed S``,
 default 1), every seeded component (track profile, sensor noise) taking the run's seed.
+Each member runs the study's :meth:`Study.monte_carlo_stop_time` when it names one and
+``--stop-time`` is not given (a per-run statistic needs a record long enough for it).
 ``table.json`` is then ``{variant: {"runs": {seed: metrics}, "summary": {metric: statistics}}}``
 over every numeric metric (nested keys joined with dots) and ``table.md`` shows the summary.
 The study's ``study_tables`` runs before its ``summary_md`` and may add to a variant's summary
@@ -37,7 +39,7 @@ from railfmu.estimators.track.metrics import rms
 from railfmu.models.errors import UserError
 
 from railfmu.experiments.engine.files import check_seed, check_times, ensure_folder, write_atomic
-from railfmu.experiments.engine.runner import _json_default, find_experiment, run_experiment
+from railfmu.experiments.engine.runner import _json_default, find_experiment, load_system, run_experiment
 
 DEFAULT_FIRST_SEED = 1
 MAX_RUNS = 1_000_000  # seeds and futures are held in memory: 10**12 runs would be killed by the OOM killer
@@ -226,6 +228,16 @@ def run_study(name: str, out: Path | str | None = None, scheduler: str | None = 
             return str(out / v)
         return str(out / v / f"seed_{s}") if keep_runs else None
 
+    member_overrides = {v: {**overrides} for v in selected}
+    if monte_carlo and overrides.get("stop_time") is None:  # the study's record length for a statistic
+        for v in selected:
+            system = load_system(exp, v, overrides.get("sets"), None, None, overrides.get("step_size"))
+            stop = exp.study.monte_carlo_stop_time(system)
+            if stop is not None:
+                member_overrides[v]["stop_time"] = float(stop)
+                print(f"study {exp.name}: variant {v}: each run {stop:g} s (the study's Monte Carlo record "
+                      "length; --stop-time overrides it)", file=log)
+
     cluster = None
     t0 = time.monotonic()
     total = len(wanted)
@@ -238,18 +250,16 @@ def run_study(name: str, out: Path | str | None = None, scheduler: str | None = 
                 client = Client(scheduler, timeout="10s")
             except (OSError, TimeoutError) as exc:
                 raise UserError(f"--scheduler {scheduler}: cannot connect ({exc})") from None
+            _workers_see(client, scheduler, files)
         elif todo:
             cluster = LocalCluster(n_workers=min(workers or 2, len(todo)), threads_per_worker=1, processes=True,
-            _workers_see(client, scheduler, files)
-        else:
-            cluster = LocalCluster(n_workers=workers or min(total, 2), threads_per_worker=1, processes=True,
                                    dashboard_address=None, silence_logs=40)
             client = Client(cluster)
         if todo:
             what = f"{len(selected)} variants x {runs} seeds ({seeds[0]}..{seeds[-1]})" if monte_carlo \
                 else f"{len(selected)} variants"
             print(f"study {exp.name}: {what} on {client.scheduler.address}", file=log)
-            futures = {client.submit(_run_member, target, v, member_out(v, s), master, {**overrides, "seed": s},
+            futures = {client.submit(_run_member, target, v, member_out(v, s), master, {**member_overrides[v], "seed": s},
                                      monte_carlo, key=f"{exp.name}-{v}-{s}", pure=False): (v, s)
                        for v, s in todo}
             for i, fut in enumerate(as_completed(futures), len(stored) + 1):

@@ -157,6 +157,13 @@ class Study:
         """The study's own figures written into ``out``; their file names."""
         return []
 
+    def monte_carlo_stop_time(self, system) -> float | None:
+        """Stop time (s) of every Monte Carlo member (``--runs N > 1``) when ``--stop-time`` is
+        not given: a statistic over seeds is only as good as each member's estimate of what it
+        scores (e.g. a wavelength band needs several wavelengths per run). ``system`` is the
+        variant's system as read. Default None: the SSD's (or the variant's) stop time."""
+        return None
+
     def series(self, run: RunData) -> dict[str, np.ndarray]:
         """Compact per-run arrays a Monte Carlo member hands back for :meth:`study_figures`
         (members write no files): e.g. the speed at each GNSS fix. Default: none. Keep them
