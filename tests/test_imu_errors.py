@@ -388,8 +388,8 @@ IMU_SSD = """<?xml version="1.0" encoding="UTF-8"?>
 
 
 @pytest.mark.parametrize("setting, message", [
-    ("imu.gyro_arw_deg_sqrt_h=-0.005", "gyro_arw_deg_sqrt_h = -0.005 must be >= 0"),
-    ("imu.accel_noise_ug_sqrt_hz=-10", "accel_noise_ug_sqrt_hz = -10 must be >= 0"),
+    ("imu.gyro_arw_deg_sqrt_h=-0.005", "-0.005 is out of range for variable 'gyro_arw_deg_sqrt_h' (must be >= 0)"),
+    ("imu.accel_noise_ug_sqrt_hz=-10", "-10.0 is out of range for variable 'accel_noise_ug_sqrt_hz' (must be >= 0)"),
     ("imu.accel_bias_correlation_time=0", "accel_bias_correlation_time = 0 must be > 0"),
 ])
 def test_a_negative_noise_density_is_one_line_and_exit_2(fmu_dir, tmp_path, setting, message):

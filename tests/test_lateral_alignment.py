@@ -149,7 +149,7 @@ def test_monte_carlo_members_score_ten_d3_wavelengths(fmu_dir):
     system = read_system(EXP, variant="standard", fmu_dirs=[fmu_dir])
     assert system.stop_time == 20.0
     assert STUDY.monte_carlo_stop_time(system) == pytest.approx(101.0)
-    fast = read_system(EXP, variant="standard", fmu_dirs=[fmu_dir], overrides={"track": {"V": 40.0}})
+    fast = read_system(EXP, variant="standard", fmu_dirs=[fmu_dir], overrides={"run": {"V": 40.0}})
     assert STUDY.monte_carlo_stop_time(fast) == pytest.approx(50.5)
 
 

@@ -26,6 +26,7 @@ reads none.)
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from pathlib import Path
 
@@ -87,7 +88,7 @@ def _detector(run: RunData, obs, rows) -> dict:
 
     s, r = run.signals, run.roles
     U = np.column_stack([np.asarray(s[r[f"imu_{k}"]])[rows] for k in range(1, 7)])
-    sa, sg = noise_sigmas(obs.s, obs.dt)
+    sa, sg = noise_sigmas(dataclasses.asdict(obs.config), obs.dt)
     det = detect_stationary(U, obs.dt, **({"sigma_a": sa, "sigma_g": sg} if min(sa, sg) > 0 else {}))
     out = {"zupt_epochs": int(np.count_nonzero(obs.zupt_epochs)), "detected_rest_s": float(det.sum() * obs.dt)}
     if str(r.get("reference_file") or "") and str(r.get("stopped_column") or ""):

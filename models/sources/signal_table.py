@@ -79,8 +79,11 @@ def build() -> Model:
                   min=0, max=1, source=src),
         Parameter("file", "CSV table: header line with 'time' or 'time_s' (s) first, then named columns; an "
                   "absolute path or relative to the FMU's resources/ (example.csv is shipped); "
-                  "empty = no table, every channel 0 (then no column may be bound)", start="", type="String",
-                  source=src),
+                  "empty = no table, every channel 0 (then no column may be bound, unless optional)",
+                  start="", type="String", source=src),
+        Parameter("optional", "True: an empty file is an optional table left out (every channel 0 "
+                  "although columns are bound, e.g. reference positions a user may not have); false: "
+                  "a bound column needs a file", "", False, type="Boolean", source=src),
     ]
     parameters += [Parameter(f"column_{k}", f"Name of the CSV column that y_{k} plays (empty: "
                              "unbound, 0)", start="", type="String", source=src)

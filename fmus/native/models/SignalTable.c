@@ -284,7 +284,9 @@ static int build_table(ModelInstance *m) {
     model_free(m);
     if (!*file) {
         /* no table and nothing bound: a source of zeros (a placeholder channel); a bound
-           column without a file is an importer that dropped the file: never zeros */
+           column without a file is an importer that dropped the file: never zeros, unless the
+           table is declared optional */
+        if (m->b[VRB_optional]) return 0;
         for (k = 0; k < N_REAL_CHANNELS + N_BOOLEAN_CHANNELS + N_INTEGER_CHANNELS; k++) {
             const size_t vr = k < N_REAL_CHANNELS ? VRS_REAL_COL(k)
                               : k < N_REAL_CHANNELS + N_BOOLEAN_CHANNELS ? VRS_BOOL_COL(k - N_REAL_CHANNELS)
