@@ -24,6 +24,7 @@ from pathlib import Path
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 
+import railfmu  # noqa: E402  (its __version__: one place, the installed metadata)
 from railfmu.experiments.engine.registry import DeprecatedEstimatorPath  # noqa: E402
 from railfmu.fmus.generate.build import BuildError  # noqa: E402
 from railfmu.models.errors import UserError  # noqa: E402
@@ -212,15 +213,6 @@ def _show_warning(message, category, filename, lineno, file=None, line=None, _de
         _default(message, category, filename, lineno, file, line)
 
 
-def _version() -> str:
-    from importlib.metadata import PackageNotFoundError, version
-
-    try:
-        return version("railfmu")
-    except PackageNotFoundError:  # a checkout that was never installed
-        return "0+unknown"
-
-
 def _verbosity(defaults: bool) -> argparse.ArgumentParser:
     """-q/-v, accepted before and after the subcommand (the subcommand's copy must not reset
     what was given before it: no defaults there)."""
@@ -241,7 +233,7 @@ def main(argv: list[str] | None = None) -> int:
     warnings.simplefilter("default", DeprecatedEstimatorPath)  # Python hides DeprecationWarnings outside __main__
     warnings.showwarning = _show_warning
     ap = _Parser(prog="railfmu", description=__doc__.splitlines()[0], parents=[_verbosity(True)])
-    ap.add_argument("--version", action="version", version=f"railfmu {_version()}")
+    ap.add_argument("--version", action="version", version=f"railfmu {railfmu.__version__}")
     ap.register("action", "parsers", _SubParsers)
     sub = ap.add_subparsers(dest="command", required=True)
     p = sub.add_parser("build", help="compile all FMUs")

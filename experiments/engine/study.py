@@ -145,9 +145,11 @@ def _stored_runs(runs_dir: Path, settings: dict, resume: bool, keys) -> dict:
 
 
 def _user_files(sets: dict) -> dict[str, str]:
-    """Make every file a ``--set`` names (``X.file``, ``X.*_file``) absolute against the current
-    directory before the tasks leave (a worker's directory is not the user's); ``resources/...``
-    stays the SSP's. Returns ``{name: absolute path}``; a missing file is a one-line error."""
+    """Make every file a ``--set`` names (``X.file``, ``X.*_file``) that exists relative to the
+    current directory absolute before the tasks leave (a worker's directory is not the user's);
+    ``resources/...`` stays the SSP's. Anything else is left as given for the SSP reader, the one
+    place that decides what a file name means (an FMU's own table, or a one-line error the first
+    member returns). Returns ``{name: absolute path}``."""
     out = {}
     for comp, params in sets.items():
         for param, value in list(params.items()):
@@ -156,9 +158,8 @@ def _user_files(sets: dict) -> dict[str, str]:
                 continue
             path = Path(value).expanduser()
             path = path if path.is_absolute() else Path.cwd() / path
-            if not path.is_file():
-                raise UserError(f"--set {comp}.{param}: {value}: no such file ({path})")
-            params[param] = out[f"{comp}.{param}"] = str(path.resolve())
+            if path.is_file():
+                params[param] = out[f"{comp}.{param}"] = str(path.resolve())
     return out
 
 
