@@ -8,8 +8,9 @@ in one process: all twelve DLLs in one wine start, which is what costs time.
 import os
 import shutil
 import subprocess
+import urllib.parse
 import zipfile
-from pathlib import Path, PurePosixPath
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -92,6 +93,7 @@ def _value(kind: str, x) -> str:
 
 
 def _block(ident: str, lib: str, resources_uri: str, out: str, md) -> str:
+    """One FMU's scenario for win64_host.c."""
     h, n, params, inputs = SCENARIOS[ident]
     by_name = {v.name: v for v in md.modelVariables}
     lines = [f"fmu {lib} {ident} {md.guid} {resources_uri} {out}"]
@@ -115,6 +117,11 @@ def _windows(path: Path) -> str:
     return "Z:" + str(path).replace("/", "\\")
 
 
+def _windows_uri(path: Path) -> str:
+    """file:///Z:/... : the URI of a Windows path, as Windows importers pass the resources."""
+    return "file:///Z:" + urllib.parse.quote(str(path))
+
+
 def _compile(cc: str, flags: list[str], out: Path, libs: list[str]) -> Path:
     res = subprocess.run([cc, "-std=c99", "-O2", "-Wall", "-Wextra", "-Werror", *flags, "-I", str(fmi_header_dir()),
                           str(HOST), "-o", str(out), *libs], capture_output=True, text=True)
@@ -122,9 +129,14 @@ def _compile(cc: str, flags: list[str], out: Path, libs: list[str]) -> Path:
     return out
 
 
+# a resources folder whose name is not ASCII (a user's folder on Windows often is): its URI
+# percent-encodes UTF-8, which msvcrt's fopen would read in the ANSI code page (portable.h)
+UTF8 = "SignalTable@utf8"
+
+
 @pytest.fixture(scope="module")
 def runs(fmu_dir, tmp_path_factory):
-    """{identifier: (linux64 outputs, win64 outputs)}, rows = communication points."""
+    """{identifier: {platform: outputs or the host's stderr}}, rows = communication points."""
     tmp = tmp_path_factory.mktemp("win64")
     native = _compile("gcc", [], tmp / "host", ["-ldl"])
     cross = _compile(compiler("win64"), PLATFORMS["win64"][3], tmp / "host.exe", [])
@@ -137,31 +149,41 @@ def runs(fmu_dir, tmp_path_factory):
         mds[ident] = md = read_model_description(str(unzipped / "modelDescription.xml"))
         scenario["linux64"] += _block(ident, str(unzipped / "binaries" / "linux64" / f"{ident}.so"),
                                       (unzipped / "resources").as_uri(), str(tmp / f"{ident}.linux64"), md)
-        # file:///Z:/... : the URI form of a Windows path, as Windows importers pass it
         scenario["win64"] += _block(ident, _windows(unzipped / "binaries" / "win64" / f"{ident}.dll"),
-                                    "file:///Z:" + str(PurePosixPath(unzipped / "resources")),
-                                    _windows(tmp / f"{ident}.win64"), md)
+                                    _windows_uri(unzipped / "resources"), _windows(tmp / f"{ident}.win64"), md)
+    ident, md = "SignalTable", mds["SignalTable"]
+    mds[UTF8] = md
+    resources = shutil.copytree(tmp / ident / "resources", tmp / "Müller-ü" / "resources")
+    scenario["linux64"] += _block(ident, str(tmp / ident / "binaries" / "linux64" / f"{ident}.so"),
+                                  resources.as_uri(), str(tmp / f"{UTF8}.linux64"), md)
+    scenario["win64"] += _block(ident, _windows(tmp / ident / "binaries" / "win64" / f"{ident}.dll"),
+                                _windows_uri(resources), _windows(tmp / f"{UTF8}.win64"), md)
     for platform, text in scenario.items():
-        (tmp / f"scenario.{platform}").write_text(text)
-    res = subprocess.run([str(native), str(tmp / "scenario.linux64")], capture_output=True, text=True, timeout=120)
-    assert res.returncode == 0, res.stderr
+        (tmp / f"scenario.{platform}").write_text(text, encoding="utf-8")
+    log = {"linux64": subprocess.run([str(native), str(tmp / "scenario.linux64")], capture_output=True,
+                                     text=True, timeout=120).stderr}
     # the wine prefix (wineboot: ~15 s once) is kept in the cache; no Mono or Gecko needed
     env = {**os.environ, "WINEPREFIX": str(cache_root() / "wine"), "WINEDEBUG": "-all",
            "WINEDLLOVERRIDES": "mscoree,mshtml="}
-    res = subprocess.run([_wine(), _windows(cross), _windows(tmp / "scenario.win64")], capture_output=True,
-                         text=True, timeout=300, env=env)
-    assert res.returncode == 0, res.stderr
+    log["win64"] = subprocess.run([_wine(), _windows(cross), _windows(tmp / "scenario.win64")],
+                                  capture_output=True, text=True, timeout=300, env=env).stderr
     out = {}
     for ident, md in mds.items():
         n_out = sum(v.causality == "output" for v in md.modelVariables)
-        out[ident] = tuple(np.fromfile(tmp / f"{ident}.{p}", dtype=np.float64).reshape(-1, n_out)
-                           for p in ("linux64", "win64"))
+        out[ident] = {p: np.fromfile(f, dtype=np.float64).reshape(-1, n_out)  # written after initialisation
+                      if (f := tmp / f"{ident}.{p}").is_file() else log[p] for p in log}
     return out
+
+
+def _outputs(runs, ident):
+    for platform, x in runs[ident].items():
+        assert not isinstance(x, str), f"{platform}: {x}"
+    return runs[ident]["linux64"], runs[ident]["win64"]
 
 
 @pytest.mark.parametrize("ident", MODELS)
 def test_win64_dll_equals_linux64(runs, ident):
-    lin, win = runs[ident]
+    lin, win = _outputs(runs, ident)
     h, n, _, _ = SCENARIOS[ident]
     assert lin.shape == win.shape
     assert len(lin) == n + 1  # no step was refused or ended early on either platform
@@ -170,6 +192,12 @@ def test_win64_dll_equals_linux64(runs, ident):
     # sin, exp, pow differently in the last ulp, which a run carries as a relative 1e-16..1e-13
     scale = np.maximum(1.0, np.abs(lin).max(axis=0))
     assert np.all(np.abs(win - lin) <= 1e-12 * scale), np.abs(win - lin).max(axis=0)
+
+
+def test_resources_in_a_folder_with_a_non_ascii_name(runs):
+    lin, win = _outputs(runs, UTF8)
+    ref_lin, ref_win = _outputs(runs, "SignalTable")
+    assert np.array_equal(lin, ref_lin) and np.array_equal(win, ref_win)
 
 
 def test_dll_needs_only_windows_own_libraries(fmu_dir, tmp_path):
@@ -185,3 +213,18 @@ def test_dll_needs_only_windows_own_libraries(fmu_dir, tmp_path):
     exported = {ln.split()[-1] for ln in table.strip().splitlines()}
     assert {"fmi2Instantiate", "fmi2DoStep", "fmi2GetReal", "fmi2SerializeFMUstate"} <= exported
     assert all(name.startswith("fmi2") for name in exported)  # nothing else leaks out
+
+
+def test_exported_ssp_carries_win64(fmu_dir, tmp_path):
+    """`railfmu export` packs the FMUs as built: a Windows tool gets its DLLs in the .ssp."""
+    import railfmu
+
+    ssp = railfmu.export("track_wheelset", tmp_path / "tw.ssp")
+    with zipfile.ZipFile(ssp) as zf:
+        fmus = [n for n in zf.namelist() if n.endswith(".fmu")]
+        assert fmus
+        for name in fmus:
+            zf.extract(name, tmp_path)
+            ident = Path(name).stem
+            with zipfile.ZipFile(tmp_path / name) as fz:
+                assert f"binaries/win64/{ident}.dll" in fz.namelist(), name
