@@ -228,3 +228,17 @@ def test_exported_ssp_carries_win64(fmu_dir, tmp_path):
             ident = Path(name).stem
             with zipfile.ZipFile(tmp_path / name) as fz:
                 assert f"binaries/win64/{ident}.dll" in fz.namelist(), name
+
+
+def test_build_for_one_platform(tmp_path):
+    """`railfmu build --platform win64`: an FMU with the DLL alone is still valid; an unknown
+    platform is refused before anything is built."""
+    from railfmu.fmus.generate.build import BuildError, build_fmu, validate
+    from railfmu.models.sources.step_source import STEP_SOURCE
+
+    path = build_fmu(STEP_SOURCE, tmp_path, platforms=["win64"])
+    names = zipfile.ZipFile(path).namelist()
+    assert "binaries/win64/StepSource.dll" in names and not any(n.startswith("binaries/linux64") for n in names)
+    assert validate(path) == []
+    with pytest.raises(BuildError, match="platform win32: not one of linux64, win64"):
+        build_fmu(STEP_SOURCE, tmp_path, platforms=["win32"])

@@ -234,6 +234,12 @@ def _has_binaries(path: Path, platforms: tuple[str, ...]) -> bool:
     return all(f"binaries/{p}/{path.stem}{PLATFORMS[p][2]}" in names for p in platforms)
 
 
+def _no_compiler(platform: str) -> str:
+    hint = "set CC or install gcc" if platform == PLATFORM else \
+        f"set {PLATFORMS[platform][1]} or install gcc-mingw-w64-x86-64"
+    return f"{platform} C compiler {compiler(platform)!r} not found ({hint})"
+
+
 def _compile(model: Model, root: Path, c_files: list[str], platform: str) -> None:
     """sources/ -> binaries/<platform>/<identifier>.so|.dll."""
     binary = root / "binaries" / platform / f"{model.identifier}{PLATFORMS[platform][2]}"
@@ -244,9 +250,7 @@ def _compile(model: Model, root: Path, c_files: list[str], platform: str) -> Non
     try:
         res = subprocess.run(cmd, capture_output=True, text=True)
     except FileNotFoundError as exc:
-        hint = "set CC or install gcc" if platform == PLATFORM else \
-            f"set {PLATFORMS[platform][1]} or install gcc-mingw-w64-x86-64"
-        raise BuildError(f"{platform} C compiler {cc!r} not found ({hint})") from exc
+        raise BuildError(_no_compiler(platform)) from exc
     if res.returncode != 0:
         raise BuildError(f"{model.identifier}: {platform} compilation failed:\n{res.stderr.strip()}")
 
@@ -322,6 +326,9 @@ def build_all(out_dir: Path | str | None = None, models: list[Model] | None = No
             return current
     from railfmu.models import all_models
 
+    for platform in platforms:  # before deriving any model (seconds)
+        if shutil.which(compiler(platform)) is None:
+            raise BuildError(_no_compiler(platform))
     everything = models is None
     models = all_models() if models is None else models
     key = sources_key(platforms)  # before building: an edit during the build must not be recorded as built
