@@ -65,8 +65,9 @@ def compiler(platform: str = PLATFORM) -> str:
 
 
 def default_platforms() -> tuple[str, ...]:
-    """linux64, and win64 where its cross-compiler is installed (compiling both costs about
-    twice the compiler time of one, once per version of the sources; docs/fmus.md)."""
+    """linux64, and win64 where its cross-compiler is installed (the second platform adds its
+    compile time to the sympy derivation both share, once per version of the sources;
+    docs/interoperability.md, Windows)."""
     return (PLATFORM, *(["win64"] if shutil.which(compiler("win64")) else []))
 
 
@@ -155,9 +156,9 @@ def _guid_of_fmu(path: Path) -> str | None:
 def sources_key(platforms=None) -> str:
     """A hash of the bytes of everything an FMU is generated from: the model definitions
     (models/, with their data and the build list), the generator, the runtime and
-    hand-written C, the FMI headers' fmpy version, the compiler and flags of each platform built. Reading bytes
-    takes milliseconds; deriving the models (sympy) takes seconds, so the up-to-date check
-    never derives (a Monte Carlo member pays it on every run)."""
+    hand-written C, the FMI headers' fmpy version, the compiler and flags of each platform
+    built. Reading bytes takes milliseconds; deriving the models (sympy) takes seconds, so the
+    up-to-date check never derives (a Monte Carlo member pays it on every run)."""
     import fmpy
 
     platforms = _platforms(platforms)
@@ -335,7 +336,7 @@ def build_all(out_dir: Path | str | None = None, models: list[Model] | None = No
     done = [0]
     if progress:
         print(f"railfmu: building {len(models)} FMUs for {', '.join(platforms)} into {out_dir} (once "
-              f"per version of the sources, ~30 s per platform)", file=sys.stderr, flush=True)
+              f"per version of the sources, ~30 s)", file=sys.stderr, flush=True)
 
     def one(m: Model) -> Path:
         path = build_fmu(m, out_dir, force, platforms)
