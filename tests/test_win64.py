@@ -129,9 +129,17 @@ def _compile(cc: str, flags: list[str], out: Path, libs: list[str]) -> Path:
     return out
 
 
-# a resources folder whose name is not ASCII (a user's folder on Windows often is): its URI
-# percent-encodes UTF-8, which msvcrt's fopen would read in the ANSI code page (portable.h)
-UTF8 = "SignalTable@utf8"
+# The forms importers give the resource location in (FMI 2.0.4, 2.1.5 allows them all), as
+# (Linux, Windows under wine) of a resources folder. "utf8": a folder whose name is not ASCII
+# (a user's folder on Windows often is), its URI percent-encodes UTF-8, which msvcrt's fopen
+# would read in the ANSI code page (portable.h).
+RESOURCE_FORMS = {
+    "utf8": (lambda p: p.as_uri(), _windows_uri),
+    "one-slash": (lambda p: "file:" + urllib.parse.quote(str(p)), lambda p: "file:/Z:" + urllib.parse.quote(str(p))),
+    "localhost": (lambda p: "file://localhost" + urllib.parse.quote(str(p)),
+                  lambda p: "file://localhost/Z:" + urllib.parse.quote(str(p))),
+    "plain-path": (str, _windows),
+}
 
 
 @pytest.fixture(scope="module")
@@ -152,12 +160,15 @@ def runs(fmu_dir, tmp_path_factory):
         scenario["win64"] += _block(ident, _windows(unzipped / "binaries" / "win64" / f"{ident}.dll"),
                                     _windows_uri(unzipped / "resources"), _windows(tmp / f"{ident}.win64"), md)
     ident, md = "SignalTable", mds["SignalTable"]
-    mds[UTF8] = md
-    resources = shutil.copytree(tmp / ident / "resources", tmp / "Müller-ü" / "resources")
-    scenario["linux64"] += _block(ident, str(tmp / ident / "binaries" / "linux64" / f"{ident}.so"),
-                                  resources.as_uri(), str(tmp / f"{UTF8}.linux64"), md)
-    scenario["win64"] += _block(ident, _windows(tmp / ident / "binaries" / "win64" / f"{ident}.dll"),
-                                _windows_uri(resources), _windows(tmp / f"{UTF8}.win64"), md)
+    for form, (linux_uri, windows_uri) in RESOURCE_FORMS.items():
+        key = f"{ident}@{form}"
+        mds[key] = md
+        folder = tmp / ("Müller-ü" if form == "utf8" else form)
+        resources = shutil.copytree(tmp / ident / "resources", folder / "resources")
+        scenario["linux64"] += _block(ident, str(tmp / ident / "binaries" / "linux64" / f"{ident}.so"),
+                                      linux_uri(resources), str(tmp / f"{key}.linux64"), md)
+        scenario["win64"] += _block(ident, _windows(tmp / ident / "binaries" / "win64" / f"{ident}.dll"),
+                                    windows_uri(resources), _windows(tmp / f"{key}.win64"), md)
     for platform, text in scenario.items():
         (tmp / f"scenario.{platform}").write_text(text, encoding="utf-8")
     log = {"linux64": subprocess.run([str(native), str(tmp / "scenario.linux64")], capture_output=True,
@@ -194,8 +205,10 @@ def test_win64_dll_equals_linux64(runs, ident):
     assert np.all(np.abs(win - lin) <= 1e-12 * scale), np.abs(win - lin).max(axis=0)
 
 
-def test_resources_in_a_folder_with_a_non_ascii_name(runs):
-    lin, win = _outputs(runs, UTF8)
+@pytest.mark.parametrize("form", RESOURCE_FORMS)
+def test_resource_location_forms(runs, form):
+    """The table is read from the resources, whatever form the location comes in."""
+    lin, win = _outputs(runs, f"SignalTable@{form}")
     ref_lin, ref_win = _outputs(runs, "SignalTable")
     assert np.array_equal(lin, ref_lin) and np.array_equal(win, ref_win)
 
