@@ -17,7 +17,7 @@ import pytest
 from fmpy import read_model_description
 
 from railfmu.fmus.cache import cache_root
-from railfmu.fmus.generate.build import CFLAGS, PLATFORMS, compiler, fmi_header_dir
+from railfmu.fmus.generate.build import PLATFORMS, compiler, fmi_header_dir
 from railfmu.models import all_models
 
 HOST = Path(__file__).parent / "win64_host.c"
@@ -150,7 +150,7 @@ def runs(fmu_dir, tmp_path_factory):
     cross = _compile(compiler("win64"), PLATFORMS["win64"][3], tmp / "host.exe", [])
     scenario = {"linux64": "", "win64": ""}
     mds = {}
-    for ident in MODELS:
+    for ident in filter(SCENARIOS.__contains__, MODELS):  # a new FMU without one fails below
         unzipped = tmp / ident
         with zipfile.ZipFile(fmu_dir / f"{ident}.fmu") as zf:
             zf.extractall(unzipped)
@@ -194,6 +194,7 @@ def _outputs(runs, ident):
 
 @pytest.mark.parametrize("ident", MODELS)
 def test_win64_dll_equals_linux64(runs, ident):
+    assert ident in SCENARIOS, f"{ident}: give it a scenario in SCENARIOS"
     lin, win = _outputs(runs, ident)
     h, n, _, _ = SCENARIOS[ident]
     assert lin.shape == win.shape
