@@ -12,13 +12,16 @@
  *   set r|i|b VR HEXBITS|INT    before initialisation (parameters, initial values)
  *   set s VR TEXT               the rest of the line
  *   steps N H_HEXBITS
+ *   rollback K                  optional: after step K save the FMU state (serialized and
+ *                               read back), after step N restore it and step K+1..N again
  *   in r|i|b VR                 one line per input, in the order of the "u" lines
  *   out r|i|b VR                one line per output
  *   inputs
  *   u HEXBITS...                N lines, the inputs set before step k
  *   end
  * OUTPUT_FILE: rows of doubles (native byte order), one row after initialisation and one
- * after each step; a step that does not return fmi2OK ends the rows.
+ * after each step (then one per step replayed after the rollback); a step that does not
+ * return fmi2OK ends the rows.
  * Exit status: 0, or 1 with a line on stderr.
  */
 #include <stdarg.h>
@@ -65,6 +68,12 @@ typedef struct {
     fmi2GetBooleanTYPE *getBoolean;
     fmi2DoStepTYPE *doStep;
     fmi2FreeInstanceTYPE *freeInstance;
+    fmi2GetFMUstateTYPE *getFMUstate;
+    fmi2SetFMUstateTYPE *setFMUstate;
+    fmi2FreeFMUstateTYPE *freeFMUstate;
+    fmi2SerializedFMUstateSizeTYPE *serializedFMUstateSize;
+    fmi2SerializeFMUstateTYPE *serializeFMUstate;
+    fmi2DeSerializeFMUstateTYPE *deSerializeFMUstate;
 } Api;
 
 static void logger(fmi2ComponentEnvironment env, fmi2String name, fmi2Status status, fmi2String category,
@@ -121,6 +130,12 @@ static int load(Library lib, Api *api) {
     LOAD(getBoolean, "fmi2GetBoolean");
     LOAD(doStep, "fmi2DoStep");
     LOAD(freeInstance, "fmi2FreeInstance");
+    LOAD(getFMUstate, "fmi2GetFMUstate");
+    LOAD(setFMUstate, "fmi2SetFMUstate");
+    LOAD(freeFMUstate, "fmi2FreeFMUstate");
+    LOAD(serializedFMUstateSize, "fmi2SerializedFMUstateSize");
+    LOAD(serializeFMUstate, "fmi2SerializeFMUstate");
+    LOAD(deSerializeFMUstate, "fmi2DeSerializeFMUstate");
 #undef LOAD
     return 0;
 }
@@ -164,13 +179,50 @@ static int write_row(const Api *api, fmi2Component c, const Var *out, int n_out,
     return fwrite(row, sizeof(double), (size_t)n_out, f) == (size_t)n_out ? 0 : fail("write failed");
 }
 
+/* Steps from..to-1 with the inputs u[k]; 1 when a step did not return fmi2OK (the rows end),
+   -1 on an error (logged). */
+static int run_steps(const Api *api, fmi2Component c, char **u, long from, long to, double h, const Var *in,
+                     int n_in, const Var *out, int n_out, FILE *f) {
+    long k;
+    for (k = from; k < to; k++) {
+        char buf[LINE];
+        char *tok;
+        int j;
+        strcpy(buf, u[k]); /* strtok writes into it: a replay reads the line again */
+        tok = strtok(buf + 1, " ");
+        for (j = 0; j < n_in; j++, tok = strtok(NULL, " ")) {
+            if (!tok || set_var(api, c, in[j], tok) != fmi2OK) return -fail("input %d of step %ld refused", j, k);
+        }
+        if (api->doStep(c, (double)k * h, h, fmi2True) != fmi2OK) return 1;
+        if (write_row(api, c, out, n_out, f)) return -1;
+    }
+    return 0;
+}
+
+/* The FMU state now, through fmi2SerializeFMUstate and back; NULL after a message. */
+static fmi2FMUstate saved_state(const Api *api, fmi2Component c) {
+    fmi2FMUstate s = NULL, back = NULL;
+    size_t size = 0;
+    fmi2Byte *bytes = NULL;
+    if (api->getFMUstate(c, &s) == fmi2OK && api->serializedFMUstateSize(c, s, &size) == fmi2OK &&
+        (bytes = (fmi2Byte *)malloc(size)) && api->serializeFMUstate(c, s, bytes, size) == fmi2OK &&
+        api->deSerializeFMUstate(c, bytes, size, &back) != fmi2OK)
+        back = NULL;
+    if (s) api->freeFMUstate(c, &s);
+    free(bytes);
+    if (!back) fail("saving the FMU state failed");
+    return back;
+}
+
 /* One "fmu" block of the scenario, from the line after "fmu" to "end". */
 static int run_fmu(FILE *sc, char *header) {
     char lib_path[LINE], ident[LINE], guid[LINE], uri[LINE], out_path[LINE], line[LINE];
     fmi2CallbackFunctions cb = {logger, calloc, free, NULL, NULL};
     Var in[MAX_VARS], out[MAX_VARS];
     int n_in = 0, n_out = 0, rc = 1;
-    long n_steps = 0, k;
+    long n_steps = 0, rollback = -1, n_read = 0, k;
+    char **u = NULL;
+    fmi2FMUstate state = NULL;
     double h = 0.0;
     Library lib;
     Api api;
@@ -202,6 +254,7 @@ static int run_fmu(FILE *sc, char *header) {
             if (st != fmi2OK) { fail("%s: %s refused", ident, line); goto done; }
         } else if (sscanf(line, "steps %ld %n", &n_steps, &pos) == 1 && pos > 0) {
             h = from_hex(line + pos);
+        } else if (sscanf(line, "rollback %ld", &rollback) == 1) {
         } else if (sscanf(line, "in %c %u", &type, &vr) == 2 && n_in < MAX_VARS) {
             in[n_in].type = type;
             in[n_in++].vr = vr;
@@ -215,6 +268,18 @@ static int run_fmu(FILE *sc, char *header) {
             goto done;
         }
     }
+    if (n_steps < 0 || rollback > n_steps || !(u = (char **)calloc((size_t)n_steps + 1, sizeof *u))) {
+        fail("%s: bad steps or rollback", ident);
+        goto done;
+    }
+    for (n_read = 0; n_read < n_steps; n_read++) {
+        if (!fgets(line, sizeof line, sc) || line[0] != 'u' || !(u[n_read] = (char *)malloc(strlen(line) + 1))) {
+            fail("%s: missing input line %ld", ident, n_read);
+            goto done;
+        }
+        chomp(line);
+        strcpy(u[n_read], line);
+    }
     if (api.setupExperiment(c, fmi2False, 0.0, 0.0, fmi2False, 0.0) != fmi2OK ||
         api.enterInitializationMode(c) != fmi2OK || api.exitInitializationMode(c) != fmi2OK) {
         fail("%s: initialisation failed", ident);
@@ -222,28 +287,26 @@ static int run_fmu(FILE *sc, char *header) {
     }
     if (!(f = fopen(out_path, "wb"))) { fail("cannot write %s", out_path); goto done; }
     if (write_row(&api, c, out, n_out, f)) goto done;
-    for (k = 0; k < n_steps; k++) {
-        char *tok;
-        int j;
-        if (!fgets(line, sizeof line, sc) || strncmp(line, "u", 1) != 0) {
-            fail("%s: missing input line %ld", ident, k);
-            goto done;
+    {
+        int ended = 0;
+        for (k = 0; k <= n_steps && !ended; k++) {
+            if (k == rollback && !(state = saved_state(&api, c))) goto done;
+            if (k < n_steps && (ended = run_steps(&api, c, u, k, k + 1, h, in, n_in, out, n_out, f)) < 0) goto done;
         }
-        chomp(line);
-        tok = strtok(line + 1, " ");
-        for (j = 0; j < n_in; j++, tok = strtok(NULL, " ")) {
-            if (!tok || set_var(&api, c, in[j], tok) != fmi2OK) {
-                fail("%s: input %d of step %ld refused", ident, j, k);
-                goto done;
-            }
+        if (!ended && state) {
+            if (api.setFMUstate(c, state) != fmi2OK) { fail("%s: fmi2SetFMUstate refused", ident); goto done; }
+            if (run_steps(&api, c, u, rollback, n_steps, h, in, n_in, out, n_out, f) < 0) goto done;
         }
-        if (api.doStep(c, (double)k * h, h, fmi2True) != fmi2OK) break; /* the rows end here */
-        if (write_row(&api, c, out, n_out, f)) goto done;
     }
     rc = 0;
 done:
     if (f) fclose(f);
+    if (state) api.freeFMUstate(c, &state);
     if (c) api.freeInstance(c);
+    if (u) {
+        for (k = 0; k < n_read; k++) free(u[k]);
+        free(u);
+    }
     close_library(lib);
     /* skip to this block's end (the inputs of steps not run), so the next FMU still runs */
     while (strcmp(line, "end") != 0 && fgets(line, sizeof line, sc)) chomp(line);
