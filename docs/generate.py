@@ -72,7 +72,9 @@ def fmus_md() -> str:
          "definitions in models/, not this file. -->", "",
          "Every FMU is an FMI 2.0 Co-Simulation FMU in native C, generated from one Python model "
          "definition in `models/` (see [architecture.md](architecture.md#fmus)). `railfmu build` "
-         "compiles them into the per-user cache; each `.fmu` carries its `sources/`, so any importer "
+         "compiles them into the per-user cache, with `binaries/linux64/` and, where mingw-w64 is "
+         "installed, `binaries/win64/` ([interoperability.md](interoperability.md#windows)); each "
+         "`.fmu` carries its `sources/`, so any importer "
          "can rebuild it on another platform. Units are SI unless the table says otherwise; the "
          "`source` of each parameter (the paper, table or datasheet its value comes from) is in the "
          "model definition and in the FMU's `modelDescription.xml` description.", "",

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from fmpy import simulate_fmu
 
-from railfmu.fmus.generate.build import CFLAGS, validate
+from railfmu.fmus.generate.build import CFLAGS, default_platforms, validate
 from railfmu.fmus.cosim.slave import FMUError, Slave
 from railfmu.models import all_models
 
@@ -21,6 +21,8 @@ def test_fmu_is_valid_and_complete(fmu_dir, ident):
     assert validate(path) == []
     names = zipfile.ZipFile(path).namelist()
     assert f"binaries/linux64/{ident}.so" in names
+    if "win64" in default_platforms():  # where mingw-w64 is installed (CI): tests/test_win64.py runs it
+        assert f"binaries/win64/{ident}.dll" in names
     assert {"sources/fmi2_runtime.c", "sources/model.h", "sources/model_config.h",
             "sources/fmi2Functions.h", "modelDescription.xml", "documentation/_main.html"} <= set(names)
 

@@ -37,7 +37,7 @@ def cmd_build(args) -> int:
 
     t0 = time.monotonic()
     ensure_folder(args.out)
-    paths = build_all(args.out, force=args.force)
+    paths = build_all(args.out, force=args.force, platforms=args.platform)
     for p in paths:
         problems = validate(p)
         print(f"{p}  ({'valid' if not problems else f'{len(problems)} problems'})")
@@ -239,6 +239,8 @@ def main(argv: list[str] | None = None) -> int:
     p = sub.add_parser("build", help="compile all FMUs")
     p.add_argument("--out", default=None, help="output folder (default: the per-user cache, ~/.cache/railfmu/fmus/KEY)")
     p.add_argument("--force", action="store_true", help="rebuild even if unchanged")
+    p.add_argument("--platform", action="append", choices=["linux64", "win64"],
+                   help="binaries to build, repeatable (default: linux64, and win64 where mingw-w64 is installed)")
     p.set_defaults(fn=cmd_build)
     p = sub.add_parser("validate", help="validate an FMU, an SSP (.ssp, .ssd, folder) or every FMU/SSP in a folder")
     p.add_argument("path")
@@ -283,7 +285,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.command == "build" and args.out is None:
         from railfmu.fmus.generate.build import default_out
 
-        args.out = default_out()
+        args.out = default_out(args.platform)
     try:
         return args.fn(args)
     except UserError as exc:

@@ -32,6 +32,16 @@ CSRC_DIR = FMUS / "native" / "models"
 COMMON_DIR = FMUS / "native" / "common"  # C shared by several models: RNG, CSV tables, spectra
 PLATFORM = "linux64"
 CFLAGS = ["-std=c99", "-O2", "-fPIC", "-shared", "-fvisibility=hidden", "-Wall", "-Wextra", "-Werror"]
+# FMI 2 platform folder -> (default compiler, the environment variable that overrides it, library
+# suffix, flags added to CFLAGS). win64: mingw-w64 with SSE2 arithmetic as on x86-64 Linux (never
+# x87 extended precision, so both binaries compute the same doubles) and libgcc linked in, so the
+# DLL needs only KERNEL32.dll and msvcrt.dll; stripped (-s), since the debug sections of mingw's
+# own start-up code would make it 3.6 times larger. The fmi2 functions are exported by
+# FMI2_Export (__declspec(dllexport) in fmi2Functions.h), and nothing else is.
+PLATFORMS = {
+    "linux64": ("gcc", "CC", ".so", []),
+    "win64": ("x86_64-w64-mingw32-gcc", "CC_WIN64", ".dll", ["-msse2", "-mfpmath=sse", "-static-libgcc", "-s"]),
+}
 FMI_HEADERS = ["fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h"]
 # Extra flags for every FMU, e.g. "-fsanitize=address,undefined" (`make sanitize`, with
 # RAILFMU_CACHE elsewhere); part of sources_key, so they never mix with a normal build.
@@ -43,8 +53,32 @@ class BuildError(RuntimeError):
     """A model could not be generated, compiled or packaged."""
 
 
-def cflags() -> list[str]:
-    return [*CFLAGS, *os.environ.get(EXTRA_CFLAGS_ENV, "").split()]
+def cflags(platform: str = PLATFORM) -> list[str]:
+    """The flags for ``platform``; RAILFMU_EXTRA_CFLAGS (sanitizers) only for the native one."""
+    extra = os.environ.get(EXTRA_CFLAGS_ENV, "").split() if platform == PLATFORM else []
+    return [*CFLAGS, *PLATFORMS[platform][3], *extra]
+
+
+def compiler(platform: str = PLATFORM) -> str:
+    default, env, _, _ = PLATFORMS[platform]
+    return os.environ.get(env, default)
+
+
+def default_platforms() -> tuple[str, ...]:
+    """linux64, and win64 where its cross-compiler is installed (the second platform adds its
+    compile time to the sympy derivation both share, once per version of the sources;
+    docs/interoperability.md, Windows)."""
+    return (PLATFORM, *(["win64"] if shutil.which(compiler("win64")) else []))
+
+
+def _platforms(platforms) -> tuple[str, ...]:
+    if platforms is None:
+        return default_platforms()
+    platforms = tuple(dict.fromkeys(platforms))
+    unknown = [p for p in platforms if p not in PLATFORMS]
+    if unknown or not platforms:
+        raise BuildError(f"platform {', '.join(unknown) or '(none)'}: not one of {', '.join(PLATFORMS)}")
+    return platforms
 
 
 def fmi_header_dir() -> Path:
@@ -119,15 +153,18 @@ def _guid_of_fmu(path: Path) -> str | None:
         return None
 
 
-def sources_key() -> str:
+def sources_key(platforms=None) -> str:
     """A hash of the bytes of everything an FMU is generated from: the model definitions
     (models/, with their data and the build list), the generator, the runtime and
-    hand-written C, the FMI headers' fmpy version, the compiler and its flags. Reading bytes
-    takes milliseconds; deriving the models (sympy) takes seconds, so the up-to-date check
-    never derives (a Monte Carlo member pays it on every run)."""
+    hand-written C, the FMI headers' fmpy version, the compiler and flags of each platform
+    built. Reading bytes takes milliseconds; deriving the models (sympy) takes seconds, so the
+    up-to-date check never derives (a Monte Carlo member pays it on every run)."""
     import fmpy
 
-    h = hashlib.sha256(repr((cflags(), os.environ.get("CC", "gcc"), fmpy.__version__)).encode())
+    platforms = _platforms(platforms)
+    # linux64 alone hashes as before win64 existed: a machine without mingw keeps its cache
+    build = [(p, compiler(p), cflags(p)) for p in platforms] if platforms != (PLATFORM,) else [cflags(), compiler()]
+    h = hashlib.sha256(repr((*build, fmpy.__version__)).encode())
     roots = [FMUS.parent / "models", RUNTIME_DIR, CSRC_DIR, COMMON_DIR]
     files = [f for r in roots for f in sorted(r.rglob("*")) if f.is_file() and "__pycache__" not in f.parts]
     files += [HERE / "codegen.py", HERE / "build.py", FMUS / "units.py"]
@@ -137,32 +174,32 @@ def sources_key() -> str:
     return h.hexdigest()
 
 
-def default_out() -> Path:
+def default_out(platforms=None) -> Path:
     """Where ``railfmu build`` and every run put the FMUs: one folder of the cache per
     :func:`sources_key`, so two versions of railfmu never overwrite each other's FMUs."""
-    return cache_root() / "fmus" / sources_key()[:16]
+    return cache_root() / "fmus" / sources_key(platforms)[:16]
 
 
-def definition_key(model: Model | str) -> str:
+def definition_key(model: Model | str, platforms=None) -> str:
     """The key of one FMU (a model or its identifier): :func:`sources_key` and its name. Equal
     keys give equal FMUs, so a build can be skipped without running the generator (sympy
     takes ~15 s on the full-vehicle model)."""
     identifier = model if isinstance(model, str) else model.identifier
-    return hashlib.sha256(f"{sources_key()} {identifier}".encode()).hexdigest()
+    return hashlib.sha256(f"{sources_key(platforms)} {identifier}".encode()).hexdigest()
 
 
 def _manifest(out_dir: Path) -> Path:
     return out_dir / ".railfmu-build.key"
 
 
-def _current_from_manifest(out_dir: Path) -> list[Path] | None:
+def _current_from_manifest(out_dir: Path, platforms=None) -> list[Path] | None:
     """The FMUs of the last full build when nothing they come from has changed since
     (:func:`sources_key`) and each is still the one built then (its GUID); else None."""
     manifest = _manifest(out_dir)
     if not manifest.is_file():
         return None
     key, *rows = manifest.read_text().split("\n")
-    if key != sources_key():
+    if key != sources_key(platforms):
         return None
     paths = []
     for row in filter(None, rows):
@@ -189,14 +226,47 @@ def _key_file(target: Path) -> Path:
     return target.with_name(f".{target.stem}.key")
 
 
-def build_fmu(model: Model, out_dir: Path | str | None = None, force: bool = False) -> Path:
+def _has_binaries(path: Path, platforms: tuple[str, ...]) -> bool:
+    try:
+        with zipfile.ZipFile(path) as zf:
+            names = set(zf.namelist())
+    except (OSError, zipfile.BadZipFile):
+        return False
+    return all(f"binaries/{p}/{path.stem}{PLATFORMS[p][2]}" in names for p in platforms)
+
+
+def _no_compiler(platform: str) -> str:
+    hint = "set CC or install gcc" if platform == PLATFORM else \
+        f"set {PLATFORMS[platform][1]} or install gcc-mingw-w64-x86-64"
+    return f"{platform} C compiler {compiler(platform)!r} not found ({hint})"
+
+
+def _compile(model: Model, root: Path, c_files: list[str], platform: str) -> None:
+    """sources/ -> binaries/<platform>/<identifier>.so|.dll."""
+    binary = root / "binaries" / platform / f"{model.identifier}{PLATFORMS[platform][2]}"
+    binary.parent.mkdir(parents=True)
+    cc = compiler(platform)
+    cmd = [cc, *cflags(platform), "-I", str(root / "sources"), "-o", str(binary),
+           *[str(root / "sources" / f) for f in c_files], "-lm"]
+    try:
+        res = subprocess.run(cmd, capture_output=True, text=True)
+    except FileNotFoundError as exc:
+        raise BuildError(_no_compiler(platform)) from exc
+    if res.returncode != 0:
+        raise BuildError(f"{model.identifier}: {platform} compilation failed:\n{res.stderr.strip()}")
+
+
+def build_fmu(model: Model, out_dir: Path | str | None = None, force: bool = False,
+              platforms=None) -> Path:
     """Build ``<out_dir>/<identifier>.fmu``; returns its path. Skips everything when the FMU
     there was built from the same definitions (:func:`definition_key`), and the compiler when
-    an FMU with the same GUID is already there (unless ``force``)."""
-    out_dir = default_out() if out_dir is None else Path(out_dir)
+    an FMU with the same GUID and binaries is already there (unless ``force``). ``platforms``:
+    the binaries it carries (``linux64``, ``win64``; default :func:`default_platforms`)."""
+    platforms = _platforms(platforms)
+    out_dir = default_out(platforms) if out_dir is None else Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     target = out_dir / f"{model.identifier}.fmu"
-    key = definition_key(model)
+    key = definition_key(model, platforms)
     key_file = _key_file(target)
     if not force and target.exists() and key_file.is_file():
         recorded_key, _, recorded_guid = key_file.read_text().partition(" ")
@@ -204,7 +274,7 @@ def build_fmu(model: Model, out_dir: Path | str | None = None, force: bool = Fal
             return target
     guid, src = generate_sources(model)
     c_files = sorted(n for n in src if n.endswith(".c"))
-    if not force and target.exists() and _guid_of_fmu(target) == guid:
+    if not force and target.exists() and _guid_of_fmu(target) == guid and _has_binaries(target, platforms):
         key_file.write_text(f"{key} {guid}\n")
         return target
     with tempfile.TemporaryDirectory(prefix=f"railfmu-{model.identifier}-") as tmp:
@@ -213,17 +283,8 @@ def build_fmu(model: Model, out_dir: Path | str | None = None, force: bool = Fal
         for name, text in src.items():
             (root / "sources" / name).write_text(text)
         (root / "modelDescription.xml").write_text(codegen.model_description(model, guid, c_files))
-        binary = root / "binaries" / PLATFORM / f"{model.identifier}.so"
-        binary.parent.mkdir(parents=True)
-        cc = os.environ.get("CC", "gcc")
-        cmd = [cc, *cflags(), "-I", str(root / "sources"), "-o", str(binary),
-               *[str(root / "sources" / f) for f in c_files], "-lm"]
-        try:
-            res = subprocess.run(cmd, capture_output=True, text=True)
-        except FileNotFoundError as exc:
-            raise BuildError(f"C compiler {cc!r} not found (set CC or install gcc)") from exc
-        if res.returncode != 0:
-            raise BuildError(f"{model.identifier}: compilation failed:\n{res.stderr.strip()}")
+        for platform in platforms:
+            _compile(model, root, c_files, platform)
         doc = root / "documentation"
         doc.mkdir()
         (doc / "_main.html").write_text(
@@ -243,7 +304,7 @@ def build_fmu(model: Model, out_dir: Path | str | None = None, force: bool = Fal
                     info.external_attr = 0o40755 << 16
                     zf.writestr(info, b"")
                 else:
-                    info.external_attr = (0o755 if path.suffix == ".so" else 0o644) << 16
+                    info.external_attr = (0o755 if path.suffix in (".so", ".dll") else 0o644) << 16
                     info.compress_type = zipfile.ZIP_DEFLATED
                     zf.writestr(info, path.read_bytes())
         tmp_fmu.replace(target)  # atomic: a reader never sees a half-written FMU
@@ -252,28 +313,33 @@ def build_fmu(model: Model, out_dir: Path | str | None = None, force: bool = Fal
 
 
 def build_all(out_dir: Path | str | None = None, models: list[Model] | None = None,
-              force: bool = False, progress: bool = True) -> list[Path]:
+              force: bool = False, progress: bool = True, platforms=None) -> list[Path]:
     """Build every model (``models``, default the build list ``railfmu.models.all_models``) into
     ``out_dir`` (default :func:`default_out`); when the whole list is asked for and
     :func:`sources_key` is the one of its last build, returns its FMUs without deriving any
-    model. ``progress`` prints a line per FMU to stderr when anything is built."""
-    out_dir = default_out() if out_dir is None else Path(out_dir)
+    model. ``progress`` prints a line per FMU to stderr when anything is built. ``platforms``:
+    as for :func:`build_fmu`."""
+    platforms = _platforms(platforms)
+    out_dir = default_out(platforms) if out_dir is None else Path(out_dir)
     if models is None and not force:
-        current = _current_from_manifest(out_dir)
+        current = _current_from_manifest(out_dir, platforms)
         if current is not None:
             return current
     from railfmu.models import all_models
 
+    for platform in platforms:  # before deriving any model (seconds)
+        if shutil.which(compiler(platform)) is None:
+            raise BuildError(_no_compiler(platform))
     everything = models is None
     models = all_models() if models is None else models
-    key = sources_key()  # before building: an edit during the build must not be recorded as built
+    key = sources_key(platforms)  # before building: an edit during the build must not be recorded as built
     done = [0]
     if progress:
-        print(f"railfmu: building {len(models)} FMUs into {out_dir} (once per version of the "
-              f"sources, ~30 s)", file=sys.stderr, flush=True)
+        print(f"railfmu: building {len(models)} FMUs for {', '.join(platforms)} into {out_dir} (once "
+              f"per version of the sources, ~30 s)", file=sys.stderr, flush=True)
 
     def one(m: Model) -> Path:
-        path = build_fmu(m, out_dir, force)
+        path = build_fmu(m, out_dir, force, platforms)
         if progress:
             with _XML_LOCK:
                 done[0] += 1
@@ -301,8 +367,12 @@ def validate(path: Path | str) -> list[str]:
     if path.is_file():
         with zipfile.ZipFile(path) as zf:
             names = zf.namelist()
-        if not any(n.startswith(f"binaries/{PLATFORM}/") and n.endswith(".so") for n in names):
-            problems.append(f"no binary in binaries/{PLATFORM}/")
+        if not any(n.startswith(f"binaries/{p}/") and n.endswith(v[2]) for p, v in PLATFORMS.items() for n in names):
+            problems.append(f"no binary in {' or '.join(f'binaries/{p}/' for p in PLATFORMS)}")
+        for platform, (_, _, suffix, _) in PLATFORMS.items():  # a platform's folder holds its library
+            folder = [n for n in names if n.startswith(f"binaries/{platform}/") and not n.endswith("/")]
+            if folder and not any(n.endswith(suffix) for n in folder):
+                problems.append(f"binaries/{platform}/ has no {suffix} library")
         if not any(n.startswith("sources/") and n.endswith(".c") for n in names):
             problems.append("no C sources in sources/")
     return problems

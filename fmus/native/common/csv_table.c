@@ -1,5 +1,6 @@
 /* CsvTable (csv_table.h). */
 #include "csv_table.h"
+#include "portable.h"
 
 #include <errno.h>
 #include <limits.h>
@@ -97,7 +98,7 @@ void csv_close(CsvTable *t) {
 
 /* The whole file, NUL-terminated; NULL after one message. */
 static char *csv_read_file(CsvTable *t) {
-    FILE *f = fopen(t->path, "rb");
+    FILE *f = portable_fopen(t->path, "rb");
     char *buf = NULL;
     size_t cap = 0, len = 0;
     if (!f) {
