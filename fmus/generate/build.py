@@ -33,6 +33,9 @@ COMMON_DIR = FMUS / "native" / "common"  # C shared by several models: RNG, CSV 
 PLATFORM = "linux64"
 CFLAGS = ["-std=c99", "-O2", "-fPIC", "-shared", "-fvisibility=hidden", "-Wall", "-Wextra", "-Werror"]
 FMI_HEADERS = ["fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h"]
+# FMI 3.0: fmi3_runtime.c maps the fmi3 functions onto the FMI 2 runtime it includes
+FMI3_HEADERS = ["fmi3Functions.h", "fmi3FunctionTypes.h", "fmi3PlatformTypes.h"]
+FMI_VERSIONS = (2, 3)
 # Extra flags for every FMU, e.g. "-fsanitize=address,undefined" (`make sanitize`, with
 # RAILFMU_CACHE elsewhere); part of sources_key, so they never mix with a normal build.
 EXTRA_CFLAGS_ENV = "RAILFMU_EXTRA_CFLAGS"
@@ -83,13 +86,24 @@ def _add_includes(src: dict[str, str]) -> None:
                 todo.append(impl.name)
 
 
-def generate_sources(model: Model) -> tuple[str, dict[str, str]]:
-    """The GUID, and file name -> text of everything in the FMU's sources/."""
+def _check_version(fmi_version: int) -> int:
+    if fmi_version not in FMI_VERSIONS:
+        raise BuildError(f"FMI version {fmi_version!r}: railfmu builds FMI 2.0 and 3.0 (2 or 3)")
+    return fmi_version
+
+
+def generate_sources(model: Model, fmi_version: int = 2) -> tuple[str, dict[str, str]]:
+    """The GUID (FMI 3: instantiation token), and file name -> text of everything in the
+    FMU's sources/."""
     src: dict[str, str] = {
         "fmi2_runtime.c": (RUNTIME_DIR / "fmi2_runtime.c").read_text(),
         "model.h": (RUNTIME_DIR / "model.h").read_text(),
     }
-    for h in FMI_HEADERS:
+    headers = FMI_HEADERS
+    if _check_version(fmi_version) == 3:
+        src["fmi3_runtime.c"] = (RUNTIME_DIR / "fmi3_runtime.c").read_text()
+        headers = [*FMI_HEADERS, *FMI3_HEADERS]
+    for h in headers:
         src[h] = (fmi_header_dir() / h).read_text()
     src[f"{model.identifier}_variables.c"] = codegen.variables_c(model)
     if model.generated:
@@ -101,7 +115,7 @@ def generate_sources(model: Model) -> tuple[str, dict[str, str]]:
                 raise BuildError(f"{model.identifier}: hand-written source {CSRC_DIR / name} does not exist")
             src[name] = path.read_text()
     _add_includes(src)
-    guid = codegen.guid_of(model, src)
+    guid = codegen.guid_of(model, src, fmi_version)
     src["model_config.h"] = codegen.model_config_h(model, guid)
     return guid, src
 
@@ -137,32 +151,40 @@ def sources_key() -> str:
     return h.hexdigest()
 
 
-def default_out() -> Path:
+def default_out(fmi_version: int = 2) -> Path:
     """Where ``railfmu build`` and every run put the FMUs: one folder of the cache per
-    :func:`sources_key`, so two versions of railfmu never overwrite each other's FMUs."""
-    return cache_root() / "fmus" / sources_key()[:16]
+    :func:`sources_key`, so two versions of railfmu never overwrite each other's FMUs; the
+    FMI 3.0 FMUs (same file names) in a sibling folder ending in ``-fmi3``."""
+    key = sources_key()[:16]
+    return cache_root() / "fmus" / (key if _check_version(fmi_version) == 2 else f"{key}-fmi3")
 
 
-def definition_key(model: Model | str) -> str:
+def definition_key(model: Model | str, fmi_version: int = 2) -> str:
     """The key of one FMU (a model or its identifier): :func:`sources_key` and its name. Equal
     keys give equal FMUs, so a build can be skipped without running the generator (sympy
     takes ~15 s on the full-vehicle model)."""
     identifier = model if isinstance(model, str) else model.identifier
-    return hashlib.sha256(f"{sources_key()} {identifier}".encode()).hexdigest()
+    version = "" if fmi_version == 2 else f" fmi{fmi_version}"  # FMI 2 keys as before
+    return hashlib.sha256(f"{sources_key()} {identifier}{version}".encode()).hexdigest()
 
 
 def _manifest(out_dir: Path) -> Path:
     return out_dir / ".railfmu-build.key"
 
 
-def _current_from_manifest(out_dir: Path) -> list[Path] | None:
+def _manifest_key(fmi_version: int) -> str:
+    """:func:`sources_key`, and the FMI version unless 2: one folder never passes for the other."""
+    return sources_key() + ("" if fmi_version == 2 else f" fmi{fmi_version}")
+
+
+def _current_from_manifest(out_dir: Path, fmi_version: int = 2) -> list[Path] | None:
     """The FMUs of the last full build when nothing they come from has changed since
     (:func:`sources_key`) and each is still the one built then (its GUID); else None."""
     manifest = _manifest(out_dir)
     if not manifest.is_file():
         return None
     key, *rows = manifest.read_text().split("\n")
-    if key != sources_key():
+    if key != _manifest_key(fmi_version):
         return None
     paths = []
     for row in filter(None, rows):
@@ -175,13 +197,14 @@ def _current_from_manifest(out_dir: Path) -> list[Path] | None:
 
 
 def _guid_in_archive(path: Path) -> str | None:
-    """The guid attribute of the archive's modelDescription.xml, without parsing the rest."""
+    """The guid (FMI 3: instantiationToken) attribute of the archive's modelDescription.xml,
+    without parsing the rest."""
     try:
         with zipfile.ZipFile(path) as zf:
             head = zf.read("modelDescription.xml")[:4096].decode("utf-8", "replace")
     except (OSError, KeyError, zipfile.BadZipFile):
         return None
-    m = re.search(r'\bguid="([^"]*)"', head)
+    m = re.search(r'\b(?:guid|instantiationToken)="([^"]*)"', head)
     return m.group(1) if m else None
 
 
@@ -189,21 +212,26 @@ def _key_file(target: Path) -> Path:
     return target.with_name(f".{target.stem}.key")
 
 
-def build_fmu(model: Model, out_dir: Path | str | None = None, force: bool = False) -> Path:
-    """Build ``<out_dir>/<identifier>.fmu``; returns its path. Skips everything when the FMU
-    there was built from the same definitions (:func:`definition_key`), and the compiler when
-    an FMU with the same GUID is already there (unless ``force``)."""
-    out_dir = default_out() if out_dir is None else Path(out_dir)
+def build_fmu(model: Model, out_dir: Path | str | None = None, force: bool = False,
+              fmi_version: int = 2) -> Path:
+    """Build ``<out_dir>/<identifier>.fmu`` for FMI ``fmi_version`` (2 or 3); returns its
+    path. Skips everything when the FMU there was built from the same definitions
+    (:func:`definition_key`), and the compiler when an FMU with the same GUID is already
+    there (unless ``force``)."""
+    out_dir = default_out(fmi_version) if out_dir is None else Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     target = out_dir / f"{model.identifier}.fmu"
-    key = definition_key(model)
+    key = definition_key(model, fmi_version)
     key_file = _key_file(target)
     if not force and target.exists() and key_file.is_file():
         recorded_key, _, recorded_guid = key_file.read_text().partition(" ")
         if recorded_key == key and _guid_of_fmu(target) == recorded_guid.strip():
             return target
-    guid, src = generate_sources(model)
-    c_files = sorted(n for n in src if n.endswith(".c"))
+    guid, src = generate_sources(model, fmi_version)
+    # FMI 3: fmi3_runtime.c includes fmi2_runtime.c, which is not compiled on its own
+    c_files = sorted(n for n in src if n.endswith(".c") and not (fmi_version == 3 and n == "fmi2_runtime.c"))
+    if fmi_version == 3:
+        src["buildDescription.xml"] = codegen.build_description_fmi3(model, c_files)
     if not force and target.exists() and _guid_of_fmu(target) == guid:
         key_file.write_text(f"{key} {guid}\n")
         return target
@@ -212,7 +240,9 @@ def build_fmu(model: Model, out_dir: Path | str | None = None, force: bool = Fal
         (root / "sources").mkdir()
         for name, text in src.items():
             (root / "sources" / name).write_text(text)
-        (root / "modelDescription.xml").write_text(codegen.model_description(model, guid, c_files))
+        (root / "modelDescription.xml").write_text(
+            codegen.model_description(model, guid, c_files) if fmi_version == 2
+            else codegen.model_description_fmi3(model, guid))
         binary = root / "binaries" / PLATFORM / f"{model.identifier}.so"
         binary.parent.mkdir(parents=True)
         cc = os.environ.get("CC", "gcc")
@@ -252,28 +282,28 @@ def build_fmu(model: Model, out_dir: Path | str | None = None, force: bool = Fal
 
 
 def build_all(out_dir: Path | str | None = None, models: list[Model] | None = None,
-              force: bool = False, progress: bool = True) -> list[Path]:
-    """Build every model (``models``, default the build list ``railfmu.models.all_models``) into
-    ``out_dir`` (default :func:`default_out`); when the whole list is asked for and
+              force: bool = False, progress: bool = True, fmi_version: int = 2) -> list[Path]:
+    """Build every model (``models``, default the build list ``railfmu.models.all_models``) for
+    FMI ``fmi_version`` (2 or 3) into ``out_dir`` (default :func:`default_out`); when the whole list is asked for and
     :func:`sources_key` is the one of its last build, returns its FMUs without deriving any
     model. ``progress`` prints a line per FMU to stderr when anything is built."""
-    out_dir = default_out() if out_dir is None else Path(out_dir)
+    out_dir = default_out(fmi_version) if out_dir is None else Path(out_dir)
     if models is None and not force:
-        current = _current_from_manifest(out_dir)
+        current = _current_from_manifest(out_dir, fmi_version)
         if current is not None:
             return current
     from railfmu.models import all_models
 
     everything = models is None
     models = all_models() if models is None else models
-    key = sources_key()  # before building: an edit during the build must not be recorded as built
+    key = _manifest_key(fmi_version)  # before building: an edit during the build must not be recorded as built
     done = [0]
     if progress:
-        print(f"railfmu: building {len(models)} FMUs into {out_dir} (once per version of the "
+        print(f"railfmu: building {len(models)} FMI {fmi_version}.0 FMUs into {out_dir} (once per version of the "
               f"sources, ~30 s)", file=sys.stderr, flush=True)
 
     def one(m: Model) -> Path:
-        path = build_fmu(m, out_dir, force)
+        path = build_fmu(m, out_dir, force, fmi_version)
         if progress:
             with _XML_LOCK:
                 done[0] += 1
