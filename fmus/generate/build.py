@@ -31,6 +31,7 @@ RUNTIME_DIR = FMUS / "native" / "runtime"
 CSRC_DIR = FMUS / "native" / "models"
 COMMON_DIR = FMUS / "native" / "common"  # C shared by several models: RNG, CSV tables, spectra
 PLATFORM = "linux64"
+PLATFORM_FMI3 = "x86_64-linux"  # FMI 3.0 names platforms by tuple (FMI 3.0, 2.5.1.1)
 CFLAGS = ["-std=c99", "-O2", "-fPIC", "-shared", "-fvisibility=hidden", "-Wall", "-Wextra", "-Werror"]
 FMI_HEADERS = ["fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h"]
 # FMI 3.0: fmi3_runtime.c maps the fmi3 functions onto the FMI 2 runtime it includes
@@ -243,7 +244,8 @@ def build_fmu(model: Model, out_dir: Path | str | None = None, force: bool = Fal
         (root / "modelDescription.xml").write_text(
             codegen.model_description(model, guid, c_files) if fmi_version == 2
             else codegen.model_description_fmi3(model, guid))
-        binary = root / "binaries" / PLATFORM / f"{model.identifier}.so"
+        platform = PLATFORM if fmi_version == 2 else PLATFORM_FMI3
+        binary = root / "binaries" / platform / f"{model.identifier}.so"
         binary.parent.mkdir(parents=True)
         cc = os.environ.get("CC", "gcc")
         cmd = [cc, *cflags(), "-I", str(root / "sources"), "-o", str(binary),
@@ -331,8 +333,9 @@ def validate(path: Path | str) -> list[str]:
     if path.is_file():
         with zipfile.ZipFile(path) as zf:
             names = zf.namelist()
-        if not any(n.startswith(f"binaries/{PLATFORM}/") and n.endswith(".so") for n in names):
-            problems.append(f"no binary in binaries/{PLATFORM}/")
+        if not any(n.startswith((f"binaries/{PLATFORM}/", f"binaries/{PLATFORM_FMI3}/")) and n.endswith(".so")
+                   for n in names):
+            problems.append(f"no binary in binaries/{PLATFORM}/ (FMI 3: binaries/{PLATFORM_FMI3}/)")
         if not any(n.startswith("sources/") and n.endswith(".c") for n in names):
             problems.append("no C sources in sources/")
     return problems
