@@ -104,6 +104,9 @@ class Slave:
     """An instantiated FMI 1.0, 2.0 or 3.0 co-simulation FMU (``version``); ``messages``
     holds (status, category, text)."""
 
+    version = 2  # a subclass that loads its own FMI 2 FMU (the container) needs no more
+    terminate_requested = False
+
     def __init__(self, fmu: Path | str, instance_name: str = "instance", logging_on: bool = False,
                  md=None):
         """``md``: the FMU's model description when the caller has read it already
