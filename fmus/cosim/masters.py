@@ -732,12 +732,12 @@ def run(system: System, master: str = "jacobi", sinks: Sequence[Sink] = (), prog
     if master not in MASTERS:
         raise UserError(f"unknown master {master!r}; choose one of {', '.join(MASTERS)}")
     if master == "container":
-        other = next((c for c in system.components if c.md is not None and str(c.md.fmiVersion) != "2.0"), None)
-        if other is None:
+        others = [f"{c.name} (FMI {c.md.fmiVersion})" for c in system.components if str(c.md.fmiVersion) != "2.0"]
+        if not others:
             return _run_container(system, sinks, progress)
         result = _run_python(system, "jacobi", sinks, progress)
-        result.notes.insert(0, f"container: FMPy's container FMU is driven with FMI 2.0 components only and "
-                               f"{other.name} is FMI {other.md.fmiVersion}: ran with the jacobi master, "
-                               "which couples like the container (same samples)")
+        result.notes.insert(0, "container: FMPy's container FMU is driven with FMI 2.0 components only, not "
+                               f"{', '.join(others)}: ran with the jacobi master, which couples like the "
+                               "container (same samples)")
         return result
     return _run_python(system, master, sinks, progress)
