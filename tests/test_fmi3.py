@@ -169,3 +169,14 @@ def test_fmi1_fmu_runs_next_to_an_fmi3_fmu_in_every_master(master, fmi3_dir, tmp
     assert list(r.data[:, r.columns.index("int.positive")]) == [float(v > 0) for v in expected]
     if master == "container":
         assert any("jacobi" in n and "FMI 1.0" in n for n in r.notes)
+
+
+def test_container_runs_fmi3_components_as_jacobi(fmi3_dir):
+    # FMPy's container FMU loads FMI 3 components itself (fmiMajorVersion in its configuration)
+    from railfmu.experiments.engine.runner import find_experiment, load_system
+
+    system = load_system(find_experiment("lateral_alignment"), "standard", stop_time=0.5, fmi_version=3)
+    assert {str(c.md.fmiVersion) for c in system.components} == {"3.0"}
+    jacobi, container = run(system, "jacobi", progress=False), run(system, "container", progress=False)
+    assert container.master == "container" and not any("jacobi master" in n for n in container.notes)
+    assert np.array_equal(container.data, jacobi.data)  # the same coupling, bit for bit

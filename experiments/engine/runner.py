@@ -173,6 +173,8 @@ def execute(name: str | Path, variant: str | None = None, out: Path | str | None
                  f"holds {recorder.rows_written} complete rows")
         raise
 
+    if result.master != master:  # the container hands systems it cannot take to jacobi: say why
+        say(f"  {result.notes[0]}")
     signals = {c: result.data[:, j] for j, c in enumerate(result.columns)}
     observers = bank.estimators()
     t_est, est = bank.arrays()

@@ -43,8 +43,9 @@ build ctypes arrays on every call), and each Real sample lands straight in the p
 result array.
 
 FMI 1.0, 2.0 and 3.0 Co-Simulation FMUs run in the Python masters alike (through
-:class:`railfmu.fmus.cosim.slave.Slave`; the container takes FMI 2.0 only and hands other
-systems to ``jacobi``, which couples the same way). FMI 2.0 status semantics, in every master: ``fmi2Discard`` from ``fmi2DoStep`` followed by
+:class:`railfmu.fmus.cosim.slave.Slave`); FMPy's container takes FMI 2.0 and 3.0 components
+(its samples equal Jacobi's for both) and hands a system with an FMI 1.0 FMU to ``jacobi``,
+which couples the same way. FMI 2.0 status semantics, in every master: ``fmi2Discard`` from ``fmi2DoStep`` followed by
 ``fmi2GetBooleanStatus(fmi2Terminated) = true`` ends the run normally at that communication
 point (``RunResult.early_end``; every row up to it is there and the sinks close as
 complete); any other ``fmi2Discard``, ``fmi2Error`` or ``fmi2Fatal`` is an error naming the
@@ -732,11 +733,12 @@ def run(system: System, master: str = "jacobi", sinks: Sequence[Sink] = (), prog
     if master not in MASTERS:
         raise UserError(f"unknown master {master!r}; choose one of {', '.join(MASTERS)}")
     if master == "container":
-        others = [f"{c.name} (FMI {c.md.fmiVersion})" for c in system.components if str(c.md.fmiVersion) != "2.0"]
+        others = [f"{c.name} (FMI {c.md.fmiVersion})" for c in system.components
+                  if str(c.md.fmiVersion) not in ("2.0", "3.0")]
         if not others:
             return _run_container(system, sinks, progress)
         result = _run_python(system, "jacobi", sinks, progress)
-        result.notes.insert(0, "container: FMPy's container FMU is driven with FMI 2.0 components only, not "
+        result.notes.insert(0, "container: FMPy's container FMU takes FMI 2.0 and 3.0 components, not "
                                f"{', '.join(others)}: ran with the jacobi master, which couples like the "
                                "container (same samples)")
         return result
