@@ -58,6 +58,24 @@ def test_every_fmi3_fmu_validates_and_exports_every_fmi3_function(fmi3_dir, tmp_
         assert not hasattr(lib, "fmi2DoStep")  # the FMI 2 layer inside stays hidden
 
 
+def test_fmi3_declares_the_fmi2_units_and_dependencies(fmi3_dir, fmu_dir):
+    # tests/test_feedthrough.py measures the FMI 2 declarations; the FMI 3 ones must say the same
+    from fmpy import read_model_description
+
+    for fmu3 in sorted(fmi3_dir.glob("*.fmu")):
+        md2, md3 = read_model_description(str(fmu_dir / fmu3.name)), read_model_description(str(fmu3))
+        assert md3.fmiVersion == "3.0" and md3.instantiationToken
+        units2 = {v.name: v.unit for v in md2.modelVariables}
+        assert {v.name: v.unit for v in md3.modelVariables} == units2, fmu3.name
+
+        def deps(unknowns):
+            return {u.variable.name: None if u.dependencies is None else sorted(d.name for d in u.dependencies)
+                    for u in unknowns}
+
+        assert deps(md3.outputs) == deps(md2.outputs), fmu3.name
+        assert deps(md3.initialUnknowns) == deps(md2.initialUnknowns), fmu3.name
+
+
 def test_unsupported_fmi3_function_fails_with_a_log_line(fmi3_dir):
     with Slave(fmi3_dir / "StepSource.fmu", "s") as s:
         f = s.fmu

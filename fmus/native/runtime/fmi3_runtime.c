@@ -25,13 +25,27 @@
  */
 
 /* The FMI 2 layer is compiled in without its exported declarations (fmi2Functions.h as
-   shipped by FMPy always exports): defined without a visible declaration, its functions
-   stay hidden (-fvisibility=hidden). */
+   shipped by FMPy always exports): defined without a visible declaration and inside the
+   hidden-visibility pragma, its functions stay out of the binary's exports, also when an
+   importer rebuilds the FMU from sources/buildDescription.xml without -fvisibility=hidden. */
+#include <float.h> /* the C library's headers outside the pragma: its functions keep */
+#include <math.h>  /* their default visibility */
+#include <stdarg.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
 #define fmi2Functions_h
 #include "fmi2TypesPlatform.h"
 #include "fmi2FunctionTypes.h"
 #define fmi2Version "2.0"
+#if defined(__GNUC__)
+#pragma GCC visibility push(hidden)
+#endif
 #include "fmi2_runtime.c"
+#if defined(__GNUC__)
+#pragma GCC visibility pop
+#endif
 
 #include "fmi3Functions.h"
 
