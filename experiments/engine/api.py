@@ -43,7 +43,7 @@ def _sets(parameters: Mapping[str, Any] | None) -> dict[str, dict[str, Any]]:
 def run(experiment: ExperimentRef, variant: str | None = None, *, parameters: Mapping[str, Any] | None = None,
         seed: int | None = None, master: str | None = None, stop_time: float | None = None,
         step_size: float | None = None, out: str | os.PathLike | None = None, progress: bool = False,
-        log: TextIO | None = None, verbose: bool = False) -> Run:
+        log: TextIO | None = None, verbose: bool = False, fmi_version: int = 2) -> Run:
     """Run one experiment and return its signals, estimates and metrics in memory.
 
     Parameters
@@ -74,6 +74,9 @@ def run(experiment: ExperimentRef, variant: str | None = None, *, parameters: Ma
         warnings then go through :mod:`warnings`).
     verbose : bool
         More detail in ``log``: the study, components, observers, timing.
+    fmi_version : int
+        2 (default) or 3: run railfmu's FMUs as their FMI 2.0 or FMI 3.0 builds (the same
+        model code; the results are equal). An SSP's own packed FMUs run as they are.
 
     Returns
     -------
@@ -93,7 +96,7 @@ def run(experiment: ExperimentRef, variant: str | None = None, *, parameters: Ma
     >>> r.metrics["observers"]["alignment"]["xi"]["rms_error"]     # doctest: +SKIP
     """
     r = execute(experiment, variant, out, master, _sets(parameters), seed, stop_time, step_size,
-                progress=progress, log=log, verbose=verbose)
+                progress=progress, log=log, verbose=verbose, fmi_version=fmi_version)
     if out is not None:
         r.save(out, log=log)
     return r
@@ -146,12 +149,13 @@ def study(experiment: ExperimentRef, variants: list[str] | None = None, *, runs:
 
 
 def read_ssp(experiment: ExperimentRef, variant: str | None = None, *, parameters: Mapping[str, Any] | None = None,
-             seed: int | None = None, stop_time: float | None = None, step_size: float | None = None):
+             seed: int | None = None, stop_time: float | None = None, step_size: float | None = None,
+             fmi_version: int = 2):
     """The resolved system of an experiment or SSP, its FMUs built, without running it.
 
     Parameters
     ----------
-    experiment, variant, parameters, seed, stop_time, step_size
+    experiment, variant, parameters, seed, stop_time, step_size, fmi_version
         As for :func:`run`.
 
     Returns
@@ -161,12 +165,13 @@ def read_ssp(experiment: ExperimentRef, variant: str | None = None, *, parameter
         and ``study`` (the study the SSD names).
     """
     exp = find_experiment(experiment)
-    return load_system(exp, variant or exp.default_variant, _sets(parameters), seed, stop_time, step_size)
+    return load_system(exp, variant or exp.default_variant, _sets(parameters), seed, stop_time, step_size,
+                       fmi_version)
 
 
 def export(experiment: ExperimentRef, path: str | os.PathLike, variant: str | None = None, *,
            parameters: Mapping[str, Any] | None = None, seed: int | None = None, stop_time: float | None = None,
-           step_size: float | None = None) -> Path:
+           step_size: float | None = None, fmi_version: int = 2) -> Path:
     """Write one variant as a self-contained ``.ssp`` (SSD, final parameters, FMUs).
 
     The archive names the experiment's study, so ``railfmu.run(path)`` gets its metrics and
@@ -176,6 +181,8 @@ def export(experiment: ExperimentRef, path: str | os.PathLike, variant: str | No
     ----------
     experiment, variant, parameters, seed, stop_time, step_size
         As for :func:`run`.
+    fmi_version : int
+        2 (default) or 3: pack the FMI 2.0 or the FMI 3.0 builds of the FMUs.
     path : str or path-like
         The archive to write; must end in ``.ssp``.
 
@@ -185,7 +192,7 @@ def export(experiment: ExperimentRef, path: str | os.PathLike, variant: str | No
         ``path``.
     """
     return export_system(experiment, path, variant, parameters=parameters, seed=seed, stop_time=stop_time,
-                         step_size=step_size)[0]
+                         step_size=step_size, fmi_version=fmi_version)[0]
 
 
 def export_system(experiment: ExperimentRef, path: str | os.PathLike, variant: str | None = None,

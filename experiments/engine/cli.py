@@ -37,7 +37,7 @@ def cmd_build(args) -> int:
 
     t0 = time.monotonic()
     ensure_folder(args.out)
-    paths = build_all(args.out, force=args.force, platforms=args.platform)
+    paths = build_all(args.out, force=args.force, fmi_version=args.fmi, platforms=args.platform)
     for p in paths:
         problems = validate(p)
         print(f"{p}  ({'valid' if not problems else f'{len(problems)} problems'})")
@@ -119,7 +119,7 @@ def cmd_run(args) -> int:
         out = Path("out") / exp.name / (args.variant or exp.default_variant or "default")
     log = _log(args)
     run(args.experiment, args.variant, master=args.master, out=out, progress=not args.quiet,
-        log=log if log is not None else _Quiet(), verbose=args.verbose, **_overrides(args))
+        log=log if log is not None else _Quiet(), verbose=args.verbose, fmi_version=args.fmi, **_overrides(args))
     return 0
 
 
@@ -152,7 +152,8 @@ def cmd_export(args) -> int:
 
     exp = find_experiment(args.experiment)
     ensure_folder(Path(args.output).absolute().parent, f"-o {args.output}: its folder")
-    out, system = export_system(args.experiment, args.output, args.variant, **_overrides(args))
+    out, system = export_system(args.experiment, args.output, args.variant, fmi_version=args.fmi,
+                                **_overrides(args))
     print(f"wrote {out} ({exp.name}/{args.variant or exp.default_variant}, "
           f"{len(system.components)} FMUs inside)")
     return 0
@@ -193,6 +194,10 @@ def _add_overrides(p) -> None:
     p.add_argument("--step-size", type=float,
                    help="the communication step [s] (default: the SSD's step annotation, else the smallest "
                         "DefaultExperiment stepSize of the FMUs)")
+
+
+def _add_fmi(p, text: str) -> None:
+    p.add_argument("--fmi", type=int, choices=(2, 3), default=2, metavar="{2,3}", help=text)
 
 
 MASTER_HELP = ("jacobi, gauss-seidel or container (default: the experiment's own choice, the master attribute "
@@ -241,6 +246,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--force", action="store_true", help="rebuild even if unchanged")
     p.add_argument("--platform", action="append", choices=["linux64", "win64"],
                    help="binaries to build, repeatable (default: linux64, and win64 where mingw-w64 is installed)")
+    _add_fmi(p, "build FMI 2.0 (default) or FMI 3.0 Co-Simulation FMUs (3: into KEY-fmi3)")
     p.set_defaults(fn=cmd_build)
     p = sub.add_parser("validate", help="validate an FMU, an SSP (.ssp, .ssd, folder) or every FMU/SSP in a folder")
     p.add_argument("path")
@@ -252,6 +258,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--variant")
     p.add_argument("--out", help="output folder (default out/EXP/VARIANT)")
     p.add_argument("--master", default=None, help=MASTER_HELP)
+    _add_fmi(p, "run railfmu's FMUs as their FMI 2.0 (default) or FMI 3.0 builds")
     _add_overrides(p)
     p.set_defaults(fn=cmd_run)
     p = sub.add_parser("study", help="variants x seeds of an experiment, in parallel (Dask) -> table")
@@ -279,13 +286,14 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("experiment")
     p.add_argument("--variant")
     p.add_argument("-o", "--output", required=True, metavar="FILE.ssp")
+    _add_fmi(p, "pack the FMI 2.0 (default) or FMI 3.0 builds of the FMUs")
     _add_overrides(p)
     p.set_defaults(fn=cmd_export)
     args = ap.parse_args(argv)
     if args.command == "build" and args.out is None:
         from railfmu.fmus.generate.build import default_out
 
-        args.out = default_out(args.platform)
+        args.out = default_out(args.fmi, args.platform)
     try:
         return args.fn(args)
     except UserError as exc:

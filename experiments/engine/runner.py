@@ -71,8 +71,9 @@ def _study_of(path: Path) -> tuple[Study, str | None, list[str]]:
 
 
 def load_system(exp: Experiment, variant: str | None, sets: dict | None = None, seed: int | None = None,
-                stop_time: float | None = None, step_size: float | None = None):
-    """The experiment's system with its FMUs built, the variant applied and command-line overrides."""
+                stop_time: float | None = None, step_size: float | None = None, fmi_version: int = 2):
+    """The experiment's system with its FMUs built (FMI ``fmi_version``, 2 or 3), the variant
+    applied and command-line overrides."""
     from railfmu.fmus.generate.build import build_all, default_out
     from railfmu.fmus.ssp import read_system
 
@@ -83,9 +84,11 @@ def load_system(exp: Experiment, variant: str | None, sets: dict | None = None, 
                         f"known: {', '.join(exp.variants) or '(none)'}")
     check_seed(seed)
     check_times(stop_time, step_size)
-    build_all(default_out())
+    if fmi_version not in (2, 3):
+        raise UserError(f"--fmi {fmi_version!r}: railfmu builds FMI 2.0 and 3.0 FMUs (2 or 3)")
+    build_all(default_out(fmi_version), fmi_version=fmi_version)
     overrides = {c: dict(p) for c, p in (sets or {}).items()}
-    system = read_system(exp.path, variant=variant, fmu_dirs=[default_out()], overrides=overrides,
+    system = read_system(exp.path, variant=variant, fmu_dirs=[default_out(fmi_version)], overrides=overrides,
                          stop_time=stop_time, step_size=step_size)
     if seed is not None:  # every random source of the system (track profile, sensor noise) takes it
         seeded = [c for c in system.components if "seed" in c.variables]
@@ -105,13 +108,15 @@ def execute(name: str | Path, variant: str | None = None, out: Path | str | None
             master: str | None = None, sets: dict | None = None, seed: int | None = None,
             stop_time: float | None = None, step_size: float | None = None, progress: bool = True,
             log: TextIO | None = sys.stderr, warn: Callable[[str], None] | None = None,
-            series: bool = False, verbose: bool = False) -> Run:
+            series: bool = False, verbose: bool = False, fmi_version: int = 2) -> Run:
     """Run one variant in memory and return the :class:`Run`. ``out``: stream signals.csv and
     estimates.csv into that folder as the run goes (an interrupted run keeps its complete
     rows); the other files are :meth:`Run.save`'s. ``log``: the progress lines (None: none);
     ``warn``: each warning line (default: printed to ``log``, else :func:`warnings.warn`).
     ``series``: keep the study's per-run arrays (:meth:`Study.series`) in ``Run.series``.
-    ``master`` None: the one the experiment prefers (``<rf:FixedStep master=...>``), else jacobi."""
+    ``master`` None: the one the experiment prefers (``<rf:FixedStep master=...>``), else jacobi.
+    ``fmi_version``: run railfmu's own FMUs as FMI 2.0 (default) or 3.0 builds; an SSP's
+    packed FMUs run as they are."""
     from railfmu.fmus.cosim.masters import MASTERS, run
     from railfmu.experiments.engine.recorder import CsvRecorder
 
@@ -128,7 +133,7 @@ def execute(name: str | Path, variant: str | None = None, out: Path | str | None
     out = Path(out) if out is not None else None
     if out is not None and out.exists() and not out.is_dir():
         raise UserError(f"--out {out}: a file of that name exists; give a folder")
-    system = load_system(exp, variant, sets, seed, stop_time, step_size)
+    system = load_system(exp, variant, sets, seed, stop_time, step_size, fmi_version)
     master = master or system.master or DEFAULT_MASTER
     roles = exp.study.bind(system)
     if out is not None:
@@ -168,6 +173,8 @@ def execute(name: str | Path, variant: str | None = None, out: Path | str | None
                  f"holds {recorder.rows_written} complete rows")
         raise
 
+    if result.master != master:  # the container hands systems it cannot take to jacobi: say why
+        say(f"  {result.notes[0]}")
     signals = {c: result.data[:, j] for j, c in enumerate(result.columns)}
     observers = bank.estimators()
     t_est, est = bank.arrays()

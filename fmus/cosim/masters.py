@@ -42,14 +42,19 @@ Integer values and Boolean 0/1 as numbers). The Python masters call the FMUs'
 build ctypes arrays on every call), and each Real sample lands straight in the preallocated
 result array.
 
-FMI 2.0 status semantics, in every master: ``fmi2Discard`` from ``fmi2DoStep`` followed by
+FMI 1.0, 2.0 and 3.0 Co-Simulation FMUs run in the Python masters alike (through
+:class:`railfmu.fmus.cosim.slave.Slave`); FMPy's container takes FMI 2.0 and 3.0 components
+(its samples equal Jacobi's for both) and hands a system with an FMI 1.0 FMU to ``jacobi``,
+which couples the same way. FMI 2.0 status semantics, in every master: ``fmi2Discard`` from ``fmi2DoStep`` followed by
 ``fmi2GetBooleanStatus(fmi2Terminated) = true`` ends the run normally at that communication
 point (``RunResult.early_end``; every row up to it is there and the sinks close as
 complete); any other ``fmi2Discard``, ``fmi2Error`` or ``fmi2Fatal`` is an error naming the
 component and the status (``X.fmu (name): what failed: <what the FMU logged, or the status>``,
 the wording of :class:`railfmu.fmus.cosim.slave.Slave`). The container reports one status for all
 its components, so on either the run up to that step is replayed with the Jacobi master
-(same samples, bit for bit) to name the inner component.
+(same samples, bit for bit) to name the inner component. FMI 3.0: ``terminateSimulation``
+from ``fmi3DoStep`` ends the run the same way; FMI 1.0 has no terminate status, so any
+``fmiDiscard`` is an error.
 """
 
 from __future__ import annotations
@@ -96,8 +101,9 @@ class _Terminated(Exception):
     """fmi2DoStep from ``t`` returned fmi2Discard and the FMU says it terminated."""
 
     def __init__(self, slave: Slave, t: float):
-        super().__init__(f"{slave.path.name} ({slave.name}) ended the simulation at t = {t:.9g} s "
-                         "(fmi2DoStep returned fmi2Discard, fmi2Terminated = true)")
+        how = ("fmi3DoStep returned terminateSimulation = true" if slave.version == 3 else
+               "fmi2DoStep returned fmi2Discard, fmi2Terminated = true")
+        super().__init__(f"{slave.path.name} ({slave.name}) ended the simulation at t = {t:.9g} s ({how})")
         self.t = t
 
 
@@ -241,16 +247,23 @@ def gauss_seidel_order(system: System, model_descriptions: Mapping) -> tuple[lis
 # -- the Python masters ----------------------------------------------------------------------
 
 _C_TYPES = {"Real": ctypes.c_double, "Integer": ctypes.c_int, "Boolean": ctypes.c_int}  # fmi2Boolean is int
+# the C type of a Boolean per FMI version: fmiBoolean is char, fmi2Boolean int, fmi3Boolean bool
+_C_BOOLEAN = {1: ctypes.c_ubyte, 2: ctypes.c_int, 3: ctypes.c_bool}
 
 
 class _Fmu:
     """Raw ctypes entry points of one instantiated Slave (FMPy's own function objects keep
-    their argtypes; these are fresh ones with cheap argument conversion)."""
+    their argtypes; these are fresh ones with cheap argument conversion). ``get``/``set``
+    take (instance, vrs, n, values) for every FMI version (FMI 3's nValues = n added);
+    ``ctype`` is the C type of a value of each kind; :meth:`step` steps with the FMI 2.0
+    semantics of the module docstring."""
 
     def __init__(self, slave: Slave):
         self.slave = slave
+        self.version = slave.version
         dll = slave.fmu.dll
         self.c = ctypes.c_void_p(slave.fmu.component)
+        self.ctype = {**_C_TYPES, "Boolean": _C_BOOLEAN[self.version]}
 
         def bind(name, *argtypes):
             fn = dll[name]
@@ -259,21 +272,41 @@ class _Fmu:
             return fn
 
         array = [ctypes.c_void_p, ctypes.c_size_t, ctypes.c_void_p]
-        self.get = {t: bind(f"fmi2Get{t}", *array) for t in _C_TYPES}
-        self.set = {t: bind(f"fmi2Set{t}", *array) for t in _C_TYPES}
+        if self.version == 3:
+            def with_n(fn):  # fmi3Get/Set*(instance, vrs, nvr, values, nValues): scalars, nValues = nvr
+                return lambda c, vrs, n, values: fn(c, vrs, n, values, n)
+
+            names = {"Real": "Float64", "Integer": "Int32", "Boolean": "Boolean"}
+            self.get = {t: with_n(bind(f"fmi3Get{names[t]}", *array, ctypes.c_size_t)) for t in _C_TYPES}
+            self.set = {t: with_n(bind(f"fmi3Set{names[t]}", *array, ctypes.c_size_t)) for t in _C_TYPES}
+            self._do_step3 = bind("fmi3DoStep", ctypes.c_double, ctypes.c_double, ctypes.c_bool,
+                                  *[ctypes.c_void_p] * 4)
+            self._flags = [ctypes.c_bool() for _ in range(3)]
+            self._last_time = ctypes.c_double()
+            self._out_args = [ctypes.addressof(a) for a in (*self._flags, self._last_time)]
+        else:
+            prefix = "fmi2" if self.version == 2 else f"{slave.md.coSimulation.modelIdentifier}_fmi"
+            self.get = {t: bind(f"{prefix}Get{t}", *array) for t in _C_TYPES}
+            self.set = {t: bind(f"{prefix}Set{t}", *array) for t in _C_TYPES}
+            self.do_step = bind(f"{prefix}DoStep", ctypes.c_double, ctypes.c_double, self.ctype["Boolean"])
         self.get_real = self.get["Real"]
-        self.do_step = bind("fmi2DoStep", ctypes.c_double, ctypes.c_double, ctypes.c_int)
 
     def fail(self, what: str, status: int):
         return self.slave.status_failure(what, status)
 
     def step(self, t: float, h: float) -> None:
         """fmi2DoStep from ``t`` with FMI 2.0 semantics: _Terminated or an error naming the status."""
-        s = self.do_step(self.c, t, h, 1)
-        if s > Status.WARNING:
-            if s == Status.DISCARD and self.slave.terminated():
+        if self.version == 3:
+            s = self._do_step3(self.c, t, h, True, *self._out_args)
+            if s <= Status.DISCARD and self._flags[1].value:  # terminateSimulation
+                self.slave.terminate_requested = True
                 raise _Terminated(self.slave, t)
-            raise self.fail(f"fmi2DoStep at t = {t:.9g} s", s)
+        else:
+            s = self.do_step(self.c, t, h, 1)
+        if s > Status.WARNING:
+            if s == Status.DISCARD and self.version == 2 and self.slave.terminated():
+                raise _Terminated(self.slave, t)
+            raise self.fail(f"{self.slave.fmi('DoStep')} at t = {t:.9g} s", s)
 
 
 class _Link:
@@ -288,16 +321,18 @@ class _Link:
         self.get, self.set = src.get[kind], dst.set[kind]
         self.src_vrs = (ctypes.c_uint * n)(*src_vrs)
         self.dst_vrs = (ctypes.c_uint * n)(*dst_vrs)
-        self.src_buf = (_C_TYPES[kind] * n)()
+        self.src_buf = (src.ctype[kind] * n)()
         self.maps = [(i, c.factor, c.offset) for i, c in enumerate(conns) if not c.identity]
-        self.dst_buf = (ctypes.c_double * n)() if self.maps else self.src_buf
+        # a second buffer for an affine map, or a Boolean between FMI versions (int <-> bool)
+        self.convert = bool(self.maps) or src.ctype[kind] is not dst.ctype[kind]
+        self.dst_buf = (dst.ctype[kind] * n)() if self.convert else self.src_buf
         self.what = f"{kind} of {', '.join(str(c) for c in conns)}"
 
     def transfer(self, t: float) -> None:
         s = self.get(self.src.c, self.src_vrs, self.n, self.src_buf)
         if s > Status.WARNING:
             raise self.src.fail(f"fmi2Get{self.what} at t = {t:.9g} s", s)
-        if self.maps:
+        if self.convert:
             src, dst = self.src_buf, self.dst_buf
             for i in range(self.n):
                 dst[i] = src[i]
@@ -346,7 +381,7 @@ class _Sampler:
             else:
                 runs.append((fmu, v.type, [v.valueReference], [col]))
         self.runs = [(f, f.get[t], (ctypes.c_uint * len(vrs))(*vrs), len(vrs), cols[0] * 8,
-                      None if t == "Real" else ((ctypes.c_int * len(vrs))(), slice(cols[0], cols[-1] + 1),
+                      None if t == "Real" else ((f.ctype[t] * len(vrs))(), slice(cols[0], cols[-1] + 1),
                                                 t == "Boolean"))
                      for f, t, vrs, cols in runs]
         self.count = 0  # rows sampled
@@ -698,5 +733,13 @@ def run(system: System, master: str = "jacobi", sinks: Sequence[Sink] = (), prog
     if master not in MASTERS:
         raise UserError(f"unknown master {master!r}; choose one of {', '.join(MASTERS)}")
     if master == "container":
-        return _run_container(system, sinks, progress)
+        others = [f"{c.name} (FMI {c.md.fmiVersion})" for c in system.components
+                  if str(c.md.fmiVersion) not in ("2.0", "3.0")]
+        if not others:
+            return _run_container(system, sinks, progress)
+        result = _run_python(system, "jacobi", sinks, progress)
+        result.notes.insert(0, "container: FMPy's container FMU takes FMI 2.0 and 3.0 components, not "
+                               f"{', '.join(others)}: ran with the jacobi master, which couples like the "
+                               "container (same samples)")
+        return result
     return _run_python(system, master, sinks, progress)

@@ -141,7 +141,7 @@ class FmuProcessModel:
         if self._initialised:  # a filter restarted elsewhere, or a failed step: start again
             self._free_snapshot()
             self._snap_time = None
-            s.call("fmi2Reset", s.fmu.reset)
+            s.call(s.fmi("Reset"), s.fmu.reset)
             self._initialised = False
         s.enter_initialization(t)
         for k, v in {**self.parameters, **self.fixed}.items():
@@ -152,7 +152,8 @@ class FmuProcessModel:
 
     def _free_snapshot(self) -> None:
         if self._snapshot:
-            self.slave.call("fmi2FreeFMUstate", self.slave.fmu.freeFMUstate, self._snapshot)
+            free_state = self.slave.fmu.freeFMUState if self.slave.version == 3 else self.slave.fmu.freeFMUstate
+            self.slave.call(self.slave.fmi("FreeFMUstate"), free_state, self._snapshot)
             self._snapshot = fmi2FMUstate()
 
     def value(self, name: str):
@@ -194,7 +195,22 @@ class FmuProcessModel:
             restore = False
         t_fmu = self._snap_time if restore else self._time
         s, f, c = self.slave, self.slave.fmu, self._c
-        set_state, set_real, get_real, do_step = f.fmi2SetFMUstate, f.fmi2SetReal, f.fmi2GetReal, f.fmi2DoStep
+        if s.version == 3:  # the same calls in FMI 3.0 (FMPy's wrappers check the status alike)
+            set_state, get_state = f.fmi3SetFMUState, f.fmi3GetFMUState
+            flags, reached = [ctypes.c_bool() for _ in range(3)], ctypes.c_double()
+            outs3 = [ctypes.byref(a) for a in (*flags, reached)]
+
+            def set_real(c, vr, n, v):
+                return f.fmi3SetFloat64(c, vr, n, v, n)
+
+            def get_real(c, vr, n, v):
+                return f.fmi3GetFloat64(c, vr, n, v, n)
+
+            def do_step(c, t, h, no_set):
+                return f.fmi3DoStep(c, t, h, bool(no_set), *outs3)
+        else:
+            set_state, set_real, get_real, do_step = f.fmi2SetFMUstate, f.fmi2SetReal, f.fmi2GetReal, f.fmi2DoStep
+            get_state = f.fmi2GetFMUstate
         vin, vr_in, vout, vr_out, n_in, n_out = self._in, self._vr_in, self._out, self._vr_out, X.shape[1], len(self._out)
         n_msg = len(s.messages)
         what, snapshot_at_t, i = "fmi2SetFMUstate", restore, -1
@@ -207,7 +223,7 @@ class FmuProcessModel:
                 self._known[:] = u.tolist()
                 set_real(c, self._vr_known, len(self.known), self._known)
             what, snapshot_at_t = "fmi2GetFMUstate", False
-            f.fmi2GetFMUstate(c, ctypes.byref(self._snapshot))  # overwrites the previous snapshot
+            get_state(c, ctypes.byref(self._snapshot))  # overwrites the previous snapshot
             snapshot_at_t = True
             what = "a sigma point"
             for i, row in enumerate(X.tolist()):

@@ -197,10 +197,11 @@ def recorded_signals(system: System) -> list[str]:
 
 # -- reading an FMU once -----------------------------------------------------------------------
 
-def _platform() -> str:
+def _platform(version: int = 2) -> str:
+    """The binaries/ folder of this platform: ``linux64`` (FMI 1 and 2), ``x86_64-linux`` (FMI 3)."""
     import fmpy
 
-    return fmpy.platform
+    return fmpy.platform if version < 3 else fmpy.platform_tuple
 
 
 def read_model(fmu: Path | str, where: str):
@@ -228,15 +229,19 @@ def _read_model(fmu: Path, where: str):
         md = read_model_description(str(fmu))
     except Exception as exc:  # noqa: BLE001 - fmpy raises anything from BadZipFile to ValidationError
         raise UserError(f"{where}: cannot read {fmu.name}: {' '.join(str(exc).split())}") from None
-    if md.fmiVersion != "2.0" or md.coSimulation is None:
-        raise UserError(f"{where}: {fmu.name} is not an FMI 2.0 co-simulation FMU (fmiVersion {md.fmiVersion})")
+    from railfmu.fmus.cosim.slave import fmi2_types, fmi_version
+
+    if fmi_version(md) is None or md.coSimulation is None:
+        raise UserError(f"{where}: {fmu.name} is not an FMI 1.0, 2.0 or 3.0 co-simulation FMU "
+                        f"(fmiVersion {md.fmiVersion})")
+    fmi2_types(md)  # FMI 3 Float64/Int32 as Real/Integer: one set of type names
     with zipfile.ZipFile(fmu) as z:
         names = z.namelist()
-    binary = f"binaries/{_platform()}/{md.coSimulation.modelIdentifier}"
+    binary = f"binaries/{_platform(fmi_version(md))}/{md.coSimulation.modelIdentifier}"
     if any(n.startswith(binary + ".") for n in names):
         return fmu, md
     if not any(n.startswith("sources/") and n.endswith(".c") for n in names):
-        raise UserError(f"{where}: {fmu.name} has no binary for this platform ({_platform()}) and no "
+        raise UserError(f"{where}: {fmu.name} has no binary for this platform ({_platform(fmi_version(md))}) and no "
                         "sources/ to compile one from")
     return _compiled(fmu, where), md
 

@@ -31,6 +31,8 @@ RUNTIME_DIR = FMUS / "native" / "runtime"
 CSRC_DIR = FMUS / "native" / "models"
 COMMON_DIR = FMUS / "native" / "common"  # C shared by several models: RNG, CSV tables, spectra
 PLATFORM = "linux64"
+PLATFORM_FMI3 = "x86_64-linux"  # FMI 3.0 names platforms by tuple (FMI 3.0, 2.5.1.1)
+FMI3_PLATFORMS = {"linux64": PLATFORM_FMI3, "win64": "x86_64-windows"}
 CFLAGS = ["-std=c99", "-O2", "-fPIC", "-shared", "-fvisibility=hidden", "-Wall", "-Wextra", "-Werror"]
 # FMI 2 platform folder -> (default compiler, the environment variable that overrides it, library
 # suffix, flags added to CFLAGS). win64: mingw-w64 with SSE2 arithmetic as on x86-64 Linux (never
@@ -43,6 +45,9 @@ PLATFORMS = {
     "win64": ("x86_64-w64-mingw32-gcc", "CC_WIN64", ".dll", ["-msse2", "-mfpmath=sse", "-static-libgcc", "-s"]),
 }
 FMI_HEADERS = ["fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h"]
+# FMI 3.0: fmi3_runtime.c maps the fmi3 functions onto the FMI 2 runtime it includes
+FMI3_HEADERS = ["fmi3Functions.h", "fmi3FunctionTypes.h", "fmi3PlatformTypes.h"]
+FMI_VERSIONS = (2, 3)
 # Extra flags for every FMU, e.g. "-fsanitize=address,undefined" (`make sanitize`, with
 # RAILFMU_CACHE elsewhere); part of sources_key, so they never mix with a normal build.
 EXTRA_CFLAGS_ENV = "RAILFMU_EXTRA_CFLAGS"
@@ -117,13 +122,24 @@ def _add_includes(src: dict[str, str]) -> None:
                 todo.append(impl.name)
 
 
-def generate_sources(model: Model) -> tuple[str, dict[str, str]]:
-    """The GUID, and file name -> text of everything in the FMU's sources/."""
+def _check_version(fmi_version: int) -> int:
+    if fmi_version not in FMI_VERSIONS:
+        raise BuildError(f"FMI version {fmi_version!r}: railfmu builds FMI 2.0 and 3.0 (2 or 3)")
+    return fmi_version
+
+
+def generate_sources(model: Model, fmi_version: int = 2) -> tuple[str, dict[str, str]]:
+    """The GUID (FMI 3: instantiation token), and file name -> text of everything in the
+    FMU's sources/."""
     src: dict[str, str] = {
         "fmi2_runtime.c": (RUNTIME_DIR / "fmi2_runtime.c").read_text(),
         "model.h": (RUNTIME_DIR / "model.h").read_text(),
     }
-    for h in FMI_HEADERS:
+    headers = FMI_HEADERS
+    if _check_version(fmi_version) == 3:
+        src["fmi3_runtime.c"] = (RUNTIME_DIR / "fmi3_runtime.c").read_text()
+        headers = [*FMI_HEADERS, *FMI3_HEADERS]
+    for h in headers:
         src[h] = (fmi_header_dir() / h).read_text()
     src[f"{model.identifier}_variables.c"] = codegen.variables_c(model)
     if model.generated:
@@ -135,7 +151,7 @@ def generate_sources(model: Model) -> tuple[str, dict[str, str]]:
                 raise BuildError(f"{model.identifier}: hand-written source {CSRC_DIR / name} does not exist")
             src[name] = path.read_text()
     _add_includes(src)
-    guid = codegen.guid_of(model, src)
+    guid = codegen.guid_of(model, src, fmi_version)
     src["model_config.h"] = codegen.model_config_h(model, guid)
     return guid, src
 
@@ -174,32 +190,40 @@ def sources_key(platforms=None) -> str:
     return h.hexdigest()
 
 
-def default_out(platforms=None) -> Path:
+def default_out(fmi_version: int = 2, platforms=None) -> Path:
     """Where ``railfmu build`` and every run put the FMUs: one folder of the cache per
-    :func:`sources_key`, so two versions of railfmu never overwrite each other's FMUs."""
-    return cache_root() / "fmus" / sources_key(platforms)[:16]
+    :func:`sources_key`, so two versions of railfmu never overwrite each other's FMUs; the
+    FMI 3.0 FMUs (same file names) in a sibling folder ending in ``-fmi3``."""
+    key = sources_key(platforms)[:16]
+    return cache_root() / "fmus" / (key if _check_version(fmi_version) == 2 else f"{key}-fmi3")
 
 
-def definition_key(model: Model | str, platforms=None) -> str:
+def definition_key(model: Model | str, fmi_version: int = 2, platforms=None) -> str:
     """The key of one FMU (a model or its identifier): :func:`sources_key` and its name. Equal
     keys give equal FMUs, so a build can be skipped without running the generator (sympy
     takes ~15 s on the full-vehicle model)."""
     identifier = model if isinstance(model, str) else model.identifier
-    return hashlib.sha256(f"{sources_key(platforms)} {identifier}".encode()).hexdigest()
+    version = "" if fmi_version == 2 else f" fmi{fmi_version}"  # FMI 2 keys as before
+    return hashlib.sha256(f"{sources_key(platforms)} {identifier}{version}".encode()).hexdigest()
 
 
 def _manifest(out_dir: Path) -> Path:
     return out_dir / ".railfmu-build.key"
 
 
-def _current_from_manifest(out_dir: Path, platforms=None) -> list[Path] | None:
+def _manifest_key(fmi_version: int, platforms=None) -> str:
+    """:func:`sources_key`, and the FMI version unless 2: one folder never passes for the other."""
+    return sources_key(platforms) + ("" if fmi_version == 2 else f" fmi{fmi_version}")
+
+
+def _current_from_manifest(out_dir: Path, fmi_version: int = 2, platforms=None) -> list[Path] | None:
     """The FMUs of the last full build when nothing they come from has changed since
     (:func:`sources_key`) and each is still the one built then (its GUID); else None."""
     manifest = _manifest(out_dir)
     if not manifest.is_file():
         return None
     key, *rows = manifest.read_text().split("\n")
-    if key != sources_key(platforms):
+    if key != _manifest_key(fmi_version, platforms):
         return None
     paths = []
     for row in filter(None, rows):
@@ -212,13 +236,14 @@ def _current_from_manifest(out_dir: Path, platforms=None) -> list[Path] | None:
 
 
 def _guid_in_archive(path: Path) -> str | None:
-    """The guid attribute of the archive's modelDescription.xml, without parsing the rest."""
+    """The guid (FMI 3: instantiationToken) attribute of the archive's modelDescription.xml,
+    without parsing the rest."""
     try:
         with zipfile.ZipFile(path) as zf:
             head = zf.read("modelDescription.xml")[:4096].decode("utf-8", "replace")
     except (OSError, KeyError, zipfile.BadZipFile):
         return None
-    m = re.search(r'\bguid="([^"]*)"', head)
+    m = re.search(r'\b(?:guid|instantiationToken)="([^"]*)"', head)
     return m.group(1) if m else None
 
 
@@ -226,13 +251,20 @@ def _key_file(target: Path) -> Path:
     return target.with_name(f".{target.stem}.key")
 
 
-def _has_binaries(path: Path, platforms: tuple[str, ...]) -> bool:
+def binary_folder(platform: str, fmi_version: int = 2) -> str:
+    """The folder under binaries/: FMI 2 names platforms ``linux64``/``win64``, FMI 3.0 by tuple
+    (FMI 3.0, 2.5.1.1)."""
+    return platform if fmi_version == 2 else FMI3_PLATFORMS[platform]
+
+
+def _has_binaries(path: Path, platforms: tuple[str, ...], fmi_version: int = 2) -> bool:
     try:
         with zipfile.ZipFile(path) as zf:
             names = set(zf.namelist())
     except (OSError, zipfile.BadZipFile):
         return False
-    return all(f"binaries/{p}/{path.stem}{PLATFORMS[p][2]}" in names for p in platforms)
+    return all(f"binaries/{binary_folder(p, fmi_version)}/{path.stem}{PLATFORMS[p][2]}" in names
+               for p in platforms)
 
 
 def _no_compiler(platform: str) -> str:
@@ -241,9 +273,9 @@ def _no_compiler(platform: str) -> str:
     return f"{platform} C compiler {compiler(platform)!r} not found ({hint})"
 
 
-def _compile(model: Model, root: Path, c_files: list[str], platform: str) -> None:
-    """sources/ -> binaries/<platform>/<identifier>.so|.dll."""
-    binary = root / "binaries" / platform / f"{model.identifier}{PLATFORMS[platform][2]}"
+def _compile(model: Model, root: Path, c_files: list[str], platform: str, fmi_version: int = 2) -> None:
+    """sources/ -> binaries/<platform folder>/<identifier>.so|.dll."""
+    binary = root / "binaries" / binary_folder(platform, fmi_version) / f"{model.identifier}{PLATFORMS[platform][2]}"
     binary.parent.mkdir(parents=True)
     cc = compiler(platform)
     cmd = [cc, *cflags(platform), "-I", str(root / "sources"), "-o", str(binary),
@@ -257,24 +289,29 @@ def _compile(model: Model, root: Path, c_files: list[str], platform: str) -> Non
 
 
 def build_fmu(model: Model, out_dir: Path | str | None = None, force: bool = False,
-              platforms=None) -> Path:
-    """Build ``<out_dir>/<identifier>.fmu``; returns its path. Skips everything when the FMU
-    there was built from the same definitions (:func:`definition_key`), and the compiler when
-    an FMU with the same GUID and binaries is already there (unless ``force``). ``platforms``:
-    the binaries it carries (``linux64``, ``win64``; default :func:`default_platforms`)."""
+              fmi_version: int = 2, platforms=None) -> Path:
+    """Build ``<out_dir>/<identifier>.fmu`` for FMI ``fmi_version`` (2 or 3); returns its
+    path. Skips everything when the FMU there was built from the same definitions
+    (:func:`definition_key`), and the compiler when an FMU with the same GUID and binaries is
+    already there (unless ``force``). ``platforms``: the binaries it carries (``linux64``,
+    ``win64``; default :func:`default_platforms`)."""
     platforms = _platforms(platforms)
-    out_dir = default_out(platforms) if out_dir is None else Path(out_dir)
+    out_dir = default_out(fmi_version, platforms) if out_dir is None else Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     target = out_dir / f"{model.identifier}.fmu"
-    key = definition_key(model, platforms)
+    key = definition_key(model, fmi_version, platforms)
     key_file = _key_file(target)
     if not force and target.exists() and key_file.is_file():
         recorded_key, _, recorded_guid = key_file.read_text().partition(" ")
         if recorded_key == key and _guid_of_fmu(target) == recorded_guid.strip():
             return target
-    guid, src = generate_sources(model)
-    c_files = sorted(n for n in src if n.endswith(".c"))
-    if not force and target.exists() and _guid_of_fmu(target) == guid and _has_binaries(target, platforms):
+    guid, src = generate_sources(model, fmi_version)
+    # FMI 3: fmi3_runtime.c includes fmi2_runtime.c, which is not compiled on its own
+    c_files = sorted(n for n in src if n.endswith(".c") and not (fmi_version == 3 and n == "fmi2_runtime.c"))
+    if fmi_version == 3:
+        src["buildDescription.xml"] = codegen.build_description_fmi3(model, c_files)
+    if (not force and target.exists() and _guid_of_fmu(target) == guid
+            and _has_binaries(target, platforms, fmi_version)):
         key_file.write_text(f"{key} {guid}\n")
         return target
     with tempfile.TemporaryDirectory(prefix=f"railfmu-{model.identifier}-") as tmp:
@@ -282,9 +319,11 @@ def build_fmu(model: Model, out_dir: Path | str | None = None, force: bool = Fal
         (root / "sources").mkdir()
         for name, text in src.items():
             (root / "sources" / name).write_text(text)
-        (root / "modelDescription.xml").write_text(codegen.model_description(model, guid, c_files))
+        (root / "modelDescription.xml").write_text(
+            codegen.model_description(model, guid, c_files) if fmi_version == 2
+            else codegen.model_description_fmi3(model, guid))
         for platform in platforms:
-            _compile(model, root, c_files, platform)
+            _compile(model, root, c_files, platform, fmi_version)
         doc = root / "documentation"
         doc.mkdir()
         (doc / "_main.html").write_text(
@@ -313,16 +352,17 @@ def build_fmu(model: Model, out_dir: Path | str | None = None, force: bool = Fal
 
 
 def build_all(out_dir: Path | str | None = None, models: list[Model] | None = None,
-              force: bool = False, progress: bool = True, platforms=None) -> list[Path]:
-    """Build every model (``models``, default the build list ``railfmu.models.all_models``) into
-    ``out_dir`` (default :func:`default_out`); when the whole list is asked for and
-    :func:`sources_key` is the one of its last build, returns its FMUs without deriving any
-    model. ``progress`` prints a line per FMU to stderr when anything is built. ``platforms``:
-    as for :func:`build_fmu`."""
+              force: bool = False, progress: bool = True, fmi_version: int = 2,
+              platforms=None) -> list[Path]:
+    """Build every model (``models``, default the build list ``railfmu.models.all_models``) for
+    FMI ``fmi_version`` (2 or 3) into ``out_dir`` (default :func:`default_out`); when the whole
+    list is asked for and :func:`sources_key` is the one of its last build, returns its FMUs
+    without deriving any model. ``progress`` prints a line per FMU to stderr when anything is
+    built. ``platforms``: as for :func:`build_fmu`."""
     platforms = _platforms(platforms)
-    out_dir = default_out(platforms) if out_dir is None else Path(out_dir)
+    out_dir = default_out(fmi_version, platforms) if out_dir is None else Path(out_dir)
     if models is None and not force:
-        current = _current_from_manifest(out_dir, platforms)
+        current = _current_from_manifest(out_dir, fmi_version, platforms)
         if current is not None:
             return current
     from railfmu.models import all_models
@@ -332,14 +372,14 @@ def build_all(out_dir: Path | str | None = None, models: list[Model] | None = No
             raise BuildError(_no_compiler(platform))
     everything = models is None
     models = all_models() if models is None else models
-    key = sources_key(platforms)  # before building: an edit during the build must not be recorded as built
+    key = _manifest_key(fmi_version, platforms)  # before building: an edit during the build must not be recorded as built
     done = [0]
     if progress:
-        print(f"railfmu: building {len(models)} FMUs for {', '.join(platforms)} into {out_dir} (once "
-              f"per version of the sources, ~30 s)", file=sys.stderr, flush=True)
+        print(f"railfmu: building {len(models)} FMI {fmi_version}.0 FMUs for {', '.join(platforms)} into "
+              f"{out_dir} (once per version of the sources, ~30 s)", file=sys.stderr, flush=True)
 
     def one(m: Model) -> Path:
-        path = build_fmu(m, out_dir, force, platforms)
+        path = build_fmu(m, out_dir, force, fmi_version, platforms)
         if progress:
             with _XML_LOCK:
                 done[0] += 1
@@ -367,12 +407,13 @@ def validate(path: Path | str) -> list[str]:
     if path.is_file():
         with zipfile.ZipFile(path) as zf:
             names = zf.namelist()
-        if not any(n.startswith(f"binaries/{p}/") and n.endswith(v[2]) for p, v in PLATFORMS.items() for n in names):
-            problems.append(f"no binary in {' or '.join(f'binaries/{p}/' for p in PLATFORMS)}")
-        for platform, (_, _, suffix, _) in PLATFORMS.items():  # a platform's folder holds its library
-            folder = [n for n in names if n.startswith(f"binaries/{platform}/") and not n.endswith("/")]
-            if folder and not any(n.endswith(suffix) for n in folder):
-                problems.append(f"binaries/{platform}/ has no {suffix} library")
+        folders = {(binary_folder(p, v), suffix) for p, (_, _, suffix, _) in PLATFORMS.items() for v in FMI_VERSIONS}
+        if not any(n.startswith(f"binaries/{f}/") and n.endswith(suffix) for f, suffix in folders for n in names):
+            problems.append(f"no binary in {' or '.join(sorted(f'binaries/{f}/' for f, _ in folders))}")
+        for folder, suffix in sorted(folders):  # a platform's folder holds its library
+            members = [n for n in names if n.startswith(f"binaries/{folder}/") and not n.endswith("/")]
+            if members and not any(n.endswith(suffix) for n in members):
+                problems.append(f"binaries/{folder}/ has no {suffix} library")
         if not any(n.startswith("sources/") and n.endswith(".c") for n in names):
             problems.append("no C sources in sources/")
     return problems

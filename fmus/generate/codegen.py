@@ -167,11 +167,108 @@ def model_description(model: Model, guid: str, source_files: list[str]) -> str:
     return "\n".join(L)
 
 
-def guid_of(model: Model, sources: dict[str, str]) -> str:
+# -- FMI 3.0 modelDescription.xml -------------------------------------------------------------
+FMI3_TYPE = {"Real": "Float64", "Integer": "Int32", "Boolean": "Boolean", "String": "String"}
+_FMI3_ORDER = ("Real", "Integer", "Boolean", "String")
+
+
+def fmi3_value_references(slots: list[Slot]) -> dict[str, int]:
+    """FMI 3 value references are unique across types (FMI 3.0, 2.4.7.3): Float64 keeps the
+    FMI 2 Real numbers (time is 0), Int32, Boolean and String follow in that order, as
+    fmus/native/runtime/fmi3_runtime.c maps them back."""
+    count = {t: sum(1 for s in slots if s.var.type == t) for t in _FMI3_ORDER}
+    base, acc = {}, 0
+    for t in _FMI3_ORDER:
+        base[t], acc = acc, acc + count[t]
+    return {s.var.name: base[s.var.type] + s.vr for s in slots}
+
+
+def model_description_fmi3(model: Model, token: str) -> str:
+    """The FMI 3.0 Co-Simulation modelDescription.xml of the same variables: one element per
+    type (Float64, Int32, Boolean, String), ``<ModelStructure>`` with ``Output`` and
+    ``InitialUnknown`` whose dependencies are value references (the FMI 2 file's indices
+    mapped). The sources are listed in sources/buildDescription.xml (FMI 3 has no
+    ``<SourceFiles>``)."""
+    slots = layout(model)
+    vr3 = fmi3_value_references(slots)
+    by_index = {str(i + 1): str(vr3[s.var.name]) for i, s in enumerate(slots)}
+    units = sorted({s.var.unit for s in slots if s.var.unit})
+    L = ['<?xml version="1.0" encoding="UTF-8"?>',
+         f'<fmiModelDescription fmiVersion="3.0" modelName="{model.identifier}" instantiationToken="{token}"',
+         f'  description={quoteattr(model.description)} generationTool="{GENERATOR}"',
+         '  variableNamingConvention="flat">',
+         f'  <CoSimulation modelIdentifier="{model.identifier}" canHandleVariableCommunicationStepSize="true"',
+         '    canGetAndSetFMUState="true" canSerializeFMUState="true" providesDirectionalDerivatives="false"',
+         '    providesAdjointDerivatives="false" hasEventMode="false" maxOutputDerivativeOrder="0"/>',
+         '  <UnitDefinitions>']
+    for u in units:
+        base = " ".join(f'{k}="{e}"' for k, e in UNITS[u].items())
+        L.append(f'    <Unit name="{u}"><BaseUnit {base}/></Unit>')
+    L += ['  </UnitDefinitions>', '  <LogCategories>']
+    L += [f'    <Category name="{n}" description={quoteattr(d)}/>' for n, d in LOG_CATEGORIES.items()]
+    start, stop, step = model.default_experiment
+    L += ['  </LogCategories>',
+          f'  <DefaultExperiment startTime="{start!r}" stopTime="{stop!r}" stepSize="{step!r}"/>',
+          '  <ModelVariables>']
+    for s in slots:
+        v, t = s.var, s.var.type
+        desc = v.description + (f" [source: {v.source}]" if v.source else "")
+        attrs = [f'name="{v.name}"', f'valueReference="{vr3[v.name]}"', f"description={quoteattr(desc)}",
+                 f'causality="{s.causality}"', f'variability="{s.variability}"']
+        if s.initial and s.causality != "parameter":
+            attrs.append(f'initial="{s.initial}"')
+        if t == "Real" and v.unit:
+            attrs.append(f'unit="{v.unit}"')
+        if t in ("Real", "Integer"):
+            if v.min is not None:
+                attrs.append(f'min="{_fmt(v.min, t)}"')
+            if v.max is not None:
+                attrs.append(f'max="{_fmt(v.max, t)}"')
+        has_start = s.initial != "calculated" and s.causality != "independent"
+        value = _fmt(v.start if v.start is not None else "", t) if has_start else None
+        if t == "String":  # FMI 3: a String's start is a child element (arrays of strings)
+            inner = f"<Start value={quoteattr(value)}/>" if has_start else ""
+            L.append(f'    <String {" ".join(attrs)}>{inner}</String>')
+        else:
+            if has_start:
+                attrs.append(f"start={quoteattr(value)}")
+            L.append(f'    <{FMI3_TYPE[t]} {" ".join(attrs)}/>')
+    L += ['  </ModelVariables>', '  <ModelStructure>']
+    deps = _output_dependencies(model, slots)
+    index = {s.var.name: i + 1 for i, s in enumerate(slots)}
+
+    def as_vrs(indices: str) -> str:
+        return " ".join(by_index[i] for i in indices.split())
+
+    for s in slots:
+        if s.causality == "output":
+            L.append(f'    <Output valueReference="{vr3[s.var.name]}" dependencies="{as_vrs(deps[s.var.name])}"/>')
+    for s in slots:
+        if s.causality == "output" and s.initial == "calculated":
+            init = _initial_dependencies(model, s.var, index)
+            L.append(f'    <InitialUnknown valueReference="{vr3[s.var.name]}"' +
+                     (f' dependencies="{as_vrs(init)}"/>' if init is not None else '/>'))
+    L += ['  </ModelStructure>', '</fmiModelDescription>', '']
+    return "\n".join(L)
+
+
+def build_description_fmi3(model: Model, source_files: list[str]) -> str:
+    """sources/buildDescription.xml (FMI 3.0, 2.5.1): the C files to compile, in C99."""
+    L = ['<?xml version="1.0" encoding="UTF-8"?>', '<fmiBuildDescription fmiVersion="3.0">',
+         f'  <BuildConfiguration modelIdentifier="{model.identifier}">',
+         '    <SourceFileSet language="C99">']
+    L += [f'      <SourceFile name="{f}"/>' for f in source_files]
+    L += ['    </SourceFileSet>', '  </BuildConfiguration>', '</fmiBuildDescription>', '']
+    return "\n".join(L)
+
+
+def guid_of(model: Model, sources: dict[str, str], fmi_version: int = 2) -> str:
     """Deterministic GUID: a hash of everything the archive holds (interface, code, and the
     documentation and resources, so a new example table is packed, not skipped as unchanged)."""
     h = hashlib.sha256()
     h.update(model_description(model, "", list(sources)).encode())
+    if fmi_version == 3:
+        h.update(model_description_fmi3(model, "").encode())
     for name in sorted(sources):
         h.update(name.encode())
         h.update(sources[name].encode())

@@ -178,6 +178,9 @@ def _declare_units(md_xml: bytes, units: dict) -> bytes:
     for sv in root.iterfind("ModelVariables/ScalarVariable"):
         if sv.get("name") in units:
             sv.find("Real").set("unit", units[sv.get("name")].name)
+    for var in root.iterfind("ModelVariables/Float64"):  # FMI 3.0: the unit on the variable itself
+        if var.get("name") in units:
+            var.set("unit", units[var.get("name")].name)
     defs = root.find("UnitDefinitions")
     if defs is None:
         defs = etree.Element("UnitDefinitions")
