@@ -43,7 +43,7 @@ def _sets(parameters: Mapping[str, Any] | None) -> dict[str, dict[str, Any]]:
 def run(experiment: ExperimentRef, variant: str | None = None, *, parameters: Mapping[str, Any] | None = None,
         seed: int | None = None, master: str | None = None, stop_time: float | None = None,
         step_size: float | None = None, out: str | os.PathLike | None = None, progress: bool = False,
-        log: TextIO | None = None, verbose: bool = False) -> Run:
+        log: TextIO | None = None, verbose: bool = False, record_format: str = "csv") -> Run:
     """Run one experiment and return its signals, estimates and metrics in memory.
 
     Parameters
@@ -74,6 +74,9 @@ def run(experiment: ExperimentRef, variant: str | None = None, *, parameters: Ma
         warnings then go through :mod:`warnings`).
     verbose : bool
         More detail in ``log``: the study, components, observers, timing.
+    record_format : str
+        ``"csv"`` (default), ``"parquet"`` or ``"mat"``: the format of the signals and
+        estimates written into ``out`` (:func:`read_signals` reads any of them back).
 
     Returns
     -------
@@ -93,7 +96,7 @@ def run(experiment: ExperimentRef, variant: str | None = None, *, parameters: Ma
     >>> r.metrics["observers"]["alignment"]["xi"]["rms_error"]     # doctest: +SKIP
     """
     r = execute(experiment, variant, out, master, _sets(parameters), seed, stop_time, step_size,
-                progress=progress, log=log, verbose=verbose)
+                progress=progress, log=log, verbose=verbose, record_format=record_format)
     if out is not None:
         r.save(out, log=log)
     return r
@@ -233,3 +236,12 @@ def list_experiments() -> dict[str, dict[str, Any]]:
         out[name] = {"description": exp.description, "variants": exp.variants,
                      "default_variant": exp.default_variant}
     return out
+
+
+def read_signals(path: str | os.PathLike) -> dict[str, "np.ndarray"]:
+    """A run's record — ``signals.csv|.parquet|.mat``, ``estimates.*``, or what a killed run
+    left (``signals.parquet.spool``: its complete rows) — as ``{column: array}``, bit for bit
+    the values the run held. ValueError (one line) for a file it cannot read."""
+    from railfmu.experiments.engine.records import read_signals as read
+
+    return read(path)

@@ -119,7 +119,8 @@ def cmd_run(args) -> int:
         out = Path("out") / exp.name / (args.variant or exp.default_variant or "default")
     log = _log(args)
     run(args.experiment, args.variant, master=args.master, out=out, progress=not args.quiet,
-        log=log if log is not None else _Quiet(), verbose=args.verbose, **_overrides(args))
+        log=log if log is not None else _Quiet(), verbose=args.verbose, record_format=args.format,
+        **_overrides(args))
     return 0
 
 
@@ -250,6 +251,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--variant")
     p.add_argument("--out", help="output folder (default out/EXP/VARIANT)")
     p.add_argument("--master", default=None, help=MASTER_HELP)
+    p.add_argument("--format", default="csv", choices=("csv", "parquet", "mat"),
+                   help="signals and estimates as CSV (default), Parquet or MATLAB .mat (compact)")
     _add_overrides(p)
     p.set_defaults(fn=cmd_run)
     p = sub.add_parser("study", help="variants x seeds of an experiment, in parallel (Dask) -> table")

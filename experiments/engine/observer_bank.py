@@ -48,7 +48,7 @@ import numpy as np
 from railfmu.estimators.core.observer import Observer
 from railfmu.estimators.track.metrics import rms
 from railfmu.experiments.engine import registry
-from railfmu.experiments.engine.recorder import CsvRecorder
+from railfmu.experiments.engine import records
 from railfmu.fmus.cosim.system import ObserverSpec, System
 from railfmu.models.errors import UserError
 from railfmu.fmus.ssp.units import OURS, Units, conversion
@@ -214,7 +214,7 @@ class ObserverBank:
     as the rows arrive (``estimates.csv``), the offline ones after a complete run
     (``estimates_<name>.csv`` beside it)."""
 
-    def __init__(self, system: System, out_csv: Path | None):
+    def __init__(self, system: System, out_csv: Path | None, record_format: str = "csv"):
         where = str(system.source or system.name)
         self.where = where
         self.step_size = system.step_size
@@ -235,7 +235,8 @@ class ObserverBank:
                 obs.prepare()                                                    # in the set-up, not at the first sample
             (self.offline if spec.offline else self.online).append(feed)
         self.out_csv = out_csv
-        self.recorder = CsvRecorder(out_csv) if out_csv is not None else None
+        self.record_format = record_format  # csv, parquet or mat (railfmu.experiments.engine.records)
+        self.recorder = records.recorder(out_csv, record_format) if out_csv is not None else None
         self.times: list[float] = []
         self.estimates: list[np.ndarray] = []  # blocks (rows, n_outputs_total), one row per recorded row
         self.results: dict[str, tuple[np.ndarray, np.ndarray]] = {}  # offline: name -> (t, X)
@@ -384,10 +385,10 @@ class ObserverBank:
             f.seconds = time.perf_counter() - t0
             self.results[f.spec.name] = (rows[:, 0], X)
             if self.out_csv is not None:
-                rec = CsvRecorder(self.out_csv.parent / f"estimates_{f.spec.name}.csv")
-                rec.open(["time", *(f"{f.spec.name}.{o}" for o in f.obs.outputs)])
-                rec.write_block(np.column_stack([rows[:, 0], X]))
-                rec.close(True)
+                records.write_table(records.record_path(self.out_csv.parent, f"estimates_{f.spec.name}",
+                                                        self.record_format),
+                                    ["time", *(f"{f.spec.name}.{o}" for o in f.obs.outputs)],
+                                    np.column_stack([rows[:, 0], X]))
 
     def arrays(self) -> tuple[np.ndarray, np.ndarray]:
         """The online estimates: times and one row of every online observer's outputs (stacked
