@@ -55,3 +55,22 @@ def test_killed_binary_run_keeps_complete_rows(fmu_dir, tmp_path, how):
     t = rec["time"]
     assert t.size > 100 and np.all(np.isfinite(np.column_stack(list(rec.values()))))
     assert np.allclose(np.diff(t), np.diff(t)[0], rtol=1e-9, atol=1e-12)  # no row lost or cut in between
+
+
+def test_replay_plays_parquet_and_mat_tables_bit_for_bit(fmu_dir, tmp_path):
+    """trolley_imu_replay on its example imu.csv/truth.csv, and on the same tables as Parquet and
+    .mat: the same signals and estimates (the tables reach the SignalTable FMU as CSV)."""
+    from railfmu.experiments.engine.records import read_table, write_table
+    from railfmu.experiments.engine.studies import HERE
+
+    resources = HERE / "trolley_imu_replay" / "resources"
+    for name, fmt in (("imu", "parquet"), ("truth", "mat")):
+        write_table(tmp_path / f"{name}.{fmt}", *read_table(resources / f"{name}.csv"))
+    ref = railfmu.run("trolley_imu_replay")
+    binary = railfmu.run("trolley_imu_replay", parameters={"imu.file": str(tmp_path / "imu.parquet"),
+                                                           "truth.file": str(tmp_path / "truth.mat")})
+    assert any("imu.parquet is parquet" in n for n in binary.metrics["notes"])
+    for k, v in ref.signals.items():
+        assert np.array_equal(binary.signals[k], v), k
+    for k, v in ref.estimates["ins"].items():
+        assert np.array_equal(binary.estimates["ins"][k], v), k
