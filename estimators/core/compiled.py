@@ -1,6 +1,6 @@
-"""numba kernels compiled once per machine (``cache=True``): a run that has to compile one says
-so in one line on stderr, since the compilation takes seconds where loading the cache takes
-milliseconds (``railfmu build`` compiles them ahead, with the FMUs)."""
+"""numba kernels compiled once per machine (``cache=True``, next to their module or in numba's
+user cache): a run that has to compile one says so in one line on stderr, since compiling takes
+seconds where loading the cache takes a fraction of one."""
 
 from __future__ import annotations
 

@@ -128,7 +128,6 @@ from dataclasses import dataclass
 from typing import Any, ClassVar
 
 import numpy as np
-from filterpy.kalman import KalmanFilter
 
 from railfmu.models.track import irregularity as track
 from railfmu.models.vehicle.wheelset import WHEELSET
@@ -243,6 +242,8 @@ class AlignmentKalmanFilter(Observer):
     def _reset(self) -> None:
         self._x = np.zeros(7)
         if not self.steady_state:
+            from filterpy.kalman import KalmanFilter  # only here: importing filterpy pulls in scipy.stats
+
             kf = KalmanFilter(dim_x=7, dim_z=4)
             kf.F, kf.H, kf.Q, kf.R = self.F, self.H, self.Q, self.R
             kf.P = self.P0.copy()
