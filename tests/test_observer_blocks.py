@@ -84,3 +84,21 @@ def test_default_variant_row_by_row_equals_blocks(fmu_dir, monkeypatch, experime
         assert eb.keys() == er.keys()
         for k in eb:
             assert np.array_equal(eb[k], er[k], equal_nan=True), (name, k)
+
+
+@pytest.mark.slow
+def test_a_run_that_compiles_a_kernel_says_so_once(tmp_path):
+    """With an empty numba cache the INS says in one line that it compiles; with the cache that
+    run left, nothing."""
+    import os
+    import subprocess
+    import sys
+
+    code = ("from railfmu.estimators.inertial.ins_observer import StrapdownINS\n"
+            "StrapdownINS(0.005).prepare()\n")
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path)}
+    first, second = (subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True)
+                     for _ in range(2))
+    lines = [ln for ln in first.stderr.splitlines() if "compiling" in ln]
+    assert lines == ["railfmu: compiling the strapdown kernel with numba (once per machine, then cached)"]
+    assert "compiling" not in second.stderr
