@@ -690,8 +690,9 @@ def _ctypes_steps(sig: _Signals, f: _Fmu, t_fmu, h, start, k0, m, data) -> tuple
 def run(system: System, master: str = "jacobi", sinks: Sequence[Sink] = (), progress: bool = True) -> RunResult:
     """Run ``system`` with ``master`` (one of :data:`MASTERS`), feeding ``sinks`` as it goes.
 
-    Sinks get ``open(columns)``, then the rows (``write`` per sample from the Python
-    masters, ``write_block`` from the container), then ``close(complete)``. An FMU that ends
+    Sinks get ``open(columns)``, then the rows (``write_block``: the Python masters every
+    :data:`HAND_OVER_ROWS` steps, or every step when a sink sets ``every_step``; the container
+    per C call), then ``close(complete)``. An FMU that ends
     the simulation (fmi2Discard + fmi2Terminated) ends the run normally at that communication
     point: ``RunResult.early_end`` says who and when, the sinks close as complete. On an error
     (UserError: a failed FMU call with what the FMU logged, a non-finite sample) or
