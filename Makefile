@@ -67,6 +67,7 @@ bench: build
 	$(BIN)/python benchmarks/train_ukf.py
 	$(BIN)/python benchmarks/process_model.py
 	$(BIN)/python benchmarks/strapdown.py
+	$(BIN)/python benchmarks/alignment_filter.py
 	$(BIN)/python benchmarks/trolley_survey.py
 	$(BIN)/python benchmarks/trolley_filter.py
 

@@ -9,7 +9,9 @@ Timed (fastest of --repeat, on a fresh INS each time):
 
   ours, mechanisation   ``Strapdown.integrate``: the compiled (numba) kernel writes an (n, 10) array,
                         attitude to roll/pitch/heading vectorised at the end
-  ours, observer        ``StrapdownINS.run``: one ``Observer.step`` per sample, as in a co-simulation
+  ours, observer blocks ``StrapdownINS.step_block`` on blocks of 1000 samples, as the observer bank
+                        feeds it in a run (one kernel call per block)
+  ours, observer rows   ``StrapdownINS.run``: one ``Observer.step`` per sample
   python-ins            ``compute_increments_from_imu`` + ``Integrator.integrate`` (numba, compiled
                         before timing), to a pandas trajectory
 
@@ -46,6 +48,7 @@ from railfmu.estimators.inertial.strapdown import Strapdown  # noqa: E402
 from railfmu.models import earth  # noqa: E402
 
 DEG = math.pi / 180
+BLOCK = 1000  # rows per step_block: the container's block (the Python masters hand over 500)
 
 
 def trajectory(duration: float, dt: float):
@@ -135,6 +138,15 @@ def main(argv=None) -> int:
     def observer():
         return StrapdownINS(args.dt, **settings).run(t, np.empty((t.size, 0)), inc)[1:]
 
+    def observer_blocks():  # as the observer bank feeds it: blocks of BLOCK rows, one step_block each
+        ins, Z = StrapdownINS(args.dt, **settings), np.empty((t.size, 0))
+        ins.prepare()
+        ins.reset(float(t[0]))
+        out = np.empty((t.size, 9))
+        for i in range(0, t.size, BLOCK):
+            ins.step_block(t[i:i + BLOCK], Z[i:i + BLOCK], inc[i:i + BLOCK], out=out[i:i + BLOCK])
+        return out[1:]
+
     def theirs():
         increments = pyins_strapdown.compute_increments_from_imu(imu, "increment")
         return pyins_strapdown.Integrator(traj.iloc[0]).integrate(increments)
@@ -142,7 +154,8 @@ def main(argv=None) -> int:
     pyins_strapdown.Integrator(traj.iloc[0]).integrate(                       # numba compiles here
         pyins_strapdown.compute_increments_from_imu(imu.iloc[:10], "increment"))
     rows = {}
-    for name, fn in (("ours, mechanisation", ours), ("ours, observer", observer), ("python-ins", theirs)):
+    for name, fn in (("ours, mechanisation", ours), ("ours, observer blocks", observer_blocks),
+                     ("ours, observer rows", observer), ("python-ins", theirs)):
         seconds, out = best(fn, args.repeat)
         if name == "python-ins":
             out = out.to_numpy()[1:].copy()
@@ -154,6 +167,10 @@ def main(argv=None) -> int:
     for name, r in rows.items():
         print(f"{name:22s} {r['seconds']:7.2f} {r['us_per_sample']:10.1f} {r['position_m']:10.2e} "
               f"{r['velocity_m_s']:12.2e} {r['attitude_rad']:12.2e}")
+    blk, mech, pyins = (rows[k]["seconds"] for k in ("ours, observer blocks", "ours, mechanisation", "python-ins"))
+    print(f"ratio observer blocks / mechanisation {blk / mech:.2f} (goal <= 2); "
+          f"observer blocks / python-ins {blk / pyins:.2f} (goal <= 1); "
+          f"observer rows / observer blocks {rows['ours, observer rows']['seconds'] / blk:.1f}")
     warm = first_call()
     for name, r in warm.items():
         print(f"fresh process, {name} JIT: import {r['import_s']:.2f} s, first integrate {r['first_integrate_s']:.2f} s")

@@ -19,7 +19,9 @@ uses the rows present, and a sample with none present is a prediction only.
 ``round((t - t_prev) / dt)`` steps, so a dropped sample costs accuracy, not correctness, and a
 time that is not a whole number of steps later is an error. :meth:`Estimator.run` feeds
 recorded arrays and :meth:`Estimator.run_csv` a recorded ``signals.csv``; online and offline
-estimates are bit-identical.
+estimates are bit-identical. :meth:`Observer.step_block` takes many samples at once (the observer
+bank hands blocks of rows), with the same results as :meth:`Observer.step` row by row; an
+estimator with a compiled recursion overrides it.
 
 :class:`OfflineObserver` is the offline kind (smoothers, batch identification): it gets the
 whole record — times, ``U``, ``Z`` and the mask — once, after the run.
@@ -191,6 +193,10 @@ class Observer(Estimator):
         raise NotImplementedError
 
     # -- the interface -----------------------------------------------------------------------
+    def prepare(self) -> None:
+        """Load what the first sample would otherwise load (a compiled kernel), so a run's
+        set-up pays for it, not its first sample. Optional; the default does nothing."""
+
     def reset(self, t0: float = 0.0) -> None:
         """Back to the initial estimate; the first :meth:`step` is expected at ``t0`` (it
         updates the initial estimate without predicting)."""
@@ -235,6 +241,25 @@ class Observer(Estimator):
             self.skipped += 1
         self.steps += 1
         return self._estimate()
+
+    def step_block(self, t: np.ndarray, Z: np.ndarray, U: np.ndarray | None = None,
+                   mask: np.ndarray | None = None, out: np.ndarray | None = None) -> np.ndarray:
+        """Many samples at once: row ``i`` of the result (``out`` if given, shape ``(n,
+        len(outputs))``) is what ``step(t[i], Z[i], U[i], mask[i])`` returns, bit for bit
+        (a subclass with a compiled block path keeps that). A failure at row ``i``
+        (ArithmeticError, ValueError) propagates with ``exc.rows_done = i``: rows before it
+        are in ``out``, the observer stands where ``step`` left it."""
+        n = len(t)
+        if out is None:
+            out = np.empty((n, len(self.outputs)))
+        i = 0
+        try:
+            for i in range(n):
+                out[i] = self.step(float(t[i]), Z[i], None if U is None else U[i], None if mask is None else mask[i])
+        except (ArithmeticError, ValueError) as exc:
+            exc.rows_done = i
+            raise
+        return out
 
     def run(self, t: np.ndarray, Z: np.ndarray, U: np.ndarray | None = None,
             mask: np.ndarray | None = None) -> np.ndarray:

@@ -178,6 +178,48 @@ class StrapdownINS(Observer):
                 return np.array(self.ins.navigation())
         return super().step(t, z, u, mask)
 
+    def prepare(self) -> None:
+        """Load the compiled mechanisation (one interval on a scratch state)."""
+        Strapdown(0.0, 0.0, 0.0, (0.0, 0.0, 0.0), (1.0, 0.0, 0.0, 0.0), self.dt).navigate(np.zeros((1, 6)))
+
+    def step_block(self, t: np.ndarray, Z: np.ndarray, U: np.ndarray | None = None,
+                   mask: np.ndarray | None = None, out: np.ndarray | None = None) -> np.ndarray:
+        """:meth:`Observer.step_block`: each stretch of samples that :meth:`step` would take
+        by its short path (one interval apart, finite increments, navigating) is one call of
+        the compiled mechanisation (:meth:`Strapdown.navigate`), bit for bit the same; any
+        other sample goes through :meth:`step`."""
+        t = np.asarray(t, dtype=float)
+        n = t.shape[0]
+        if out is None:
+            out = np.empty((n, len(self.outputs)))
+        if U is None or n == 0 or len(Z[0]) != 0:
+            return super().step_block(t, Z, U, mask, out)
+        U = np.asarray(U, dtype=float)
+        if U.shape != (n, 6):
+            return super().step_block(t, Z, U, mask, out)
+        prev = np.empty(n)
+        prev[0] = np.nan if self._t is None else self._t
+        prev[1:] = t[:-1]
+        ok = (np.abs(t - prev - self.dt) <= 1e-6 * self.dt) & np.isfinite(U).all(axis=1)
+        i = 0
+        while i < n:
+            if not (ok[i] and self._t is not None and not self._pending and not self._aligning):
+                try:
+                    super().step_block(t[i:i + 1], Z[i:i + 1], U[i:i + 1], None if mask is None else mask[i:i + 1],
+                                       out[i:i + 1])
+                except (ArithmeticError, ValueError) as exc:
+                    exc.rows_done = i
+                    raise
+                i += 1
+                continue
+            j = i + int(np.argmin(ok[i:])) if not ok[i:].all() else n
+            self.ins.navigate(U[i:j], out[i:j])
+            self._held = U[j - 1].tolist()
+            self._t = float(t[j - 1])
+            self.steps += j - i
+            i = j
+        return out
+
     def _update(self, z: np.ndarray, mask: np.ndarray) -> None:
         pass  # free-inertial: no measurements
 

@@ -64,6 +64,7 @@ from railfmu.estimators.inertial.attitude import (
     quat_increment_from_rotvec,
     rph_from_quat,
 )
+from railfmu.estimators.core.compiled import cache_note
 from railfmu.models import earth
 
 _A, _E2, _RATE = earth.A, earth.E2, earth.RATE
@@ -218,6 +219,26 @@ def _integrate(x, h, inc, out):
             out[k, j] = x[j]
 
 
+@numba.njit(cache=True)
+def _navigate(x, h, inc, out):
+    """:func:`_step` over the rows of ``inc`` (n, 6); row k of ``out`` (n, 9) gets the
+    navigation after interval k exactly as :meth:`Strapdown.navigation` gives it (the same
+    roll, pitch and heading arithmetic, libm's atan2)."""
+    for k in range(inc.shape[0]):
+        _step(x, h, inc[k, 0], inc[k, 1], inc[k, 2], inc[k, 3], inc[k, 4], inc[k, 5])
+        for j in range(6):
+            out[k, j] = x[j]
+        q0, q1, q2, q3 = x[_Q0], x[_Q1], x[_Q2], x[_Q3]
+        c31 = 2.0 * (q1 * q3 - q0 * q2)
+        c32 = 2.0 * (q2 * q3 + q0 * q1)
+        c33 = q0 * q0 - q1 * q1 - q2 * q2 + q3 * q3
+        c21 = 2.0 * (q1 * q2 + q0 * q3)
+        c11 = q0 * q0 + q1 * q1 - q2 * q2 - q3 * q3
+        out[k, 6] = math.atan2(c32, c33)
+        out[k, 7] = math.atan2(-c31, math.sqrt(c32 * c32 + c33 * c33))
+        out[k, 8] = math.atan2(c21, c11)
+
+
 def _state_property(i: int, doc: str, settable: bool = False) -> property:
     def get(self) -> float:
         return float(self._x[i])
@@ -257,6 +278,7 @@ class Strapdown:
     def __init__(self, lat: float, lon: float, height: float, v_ned, q, dt: float) -> None:
         if not (math.isfinite(dt) and dt > 0):
             raise ValueError(f"Strapdown: dt must be a positive number of seconds, not {dt!r}")
+        cache_note("strapdown", _step, _navigate)
         self.dt = float(dt)
         x = self._x = np.zeros(_N_STATE)
         x[_LAT], x[_LON], x[_H] = float(lat), float(lon), float(height)
@@ -320,6 +342,23 @@ class Strapdown:
 
     def quaternion(self) -> np.ndarray:
         return self._x[_Q0:_Q3 + 1].copy()
+
+    def navigate(self, increments, out: np.ndarray | None = None) -> np.ndarray:
+        """All rows of ``increments`` ``(n, 6)``, one interval each, in one compiled call ->
+        ``(n, 9)`` (``out`` if given): row k is what :meth:`navigation` returns after
+        :meth:`update` with row k, bit for bit."""
+        inc = np.ascontiguousarray(increments, dtype=np.float64)
+        if inc.ndim != 2 or inc.shape[1] != 6:
+            raise ValueError(f"Strapdown.navigate: increments of shape {inc.shape}, expected (n, 6)")
+        if out is None or not out.flags.c_contiguous:
+            res = np.empty((inc.shape[0], len(NAV)))
+            _navigate(self._x, self.dt, inc, res)
+            if out is None:
+                return res
+            out[:] = res
+            return out
+        _navigate(self._x, self.dt, inc, out)
+        return out
 
     def integrate(self, increments) -> np.ndarray:
         """All rows of ``increments`` ``(n, 6)`` (``dtheta_x..z`` rad, ``dv_x..z`` m/s), one

@@ -128,14 +128,13 @@ from dataclasses import dataclass
 from typing import Any, ClassVar
 
 import numpy as np
-from filterpy.kalman import KalmanFilter
 
 from railfmu.models.track import irregularity as track
 from railfmu.models.vehicle.wheelset import WHEELSET
 
-from railfmu.estimators.core import kalman, smoothers
+from railfmu.estimators.core import fixed_gain, kalman, smoothers
 from railfmu.estimators.core.discretize import van_loan
-from railfmu.estimators.core.observer import Observer, OfflineObserver
+from railfmu.estimators.core.observer import _TIME_RTOL, Observer, OfflineObserver
 from railfmu.estimators.core.settings import Settings, setting
 
 STATES = ("y", "psi", "y_f", "dy", "dpsi", "dy_f", "xi")
@@ -236,12 +235,15 @@ class AlignmentKalmanFilter(Observer):
         self.P0 = self.P_prior.copy() if c.P0 is None else np.diag(np.square(c.P0))
         self._zbuf = np.zeros(4)  # [ddy, dpsi, ddy_f, 0]: the virtual reading stays 0
         self._row_gains: dict[tuple[int, ...], np.ndarray] = {}
+        self._block: fixed_gain.BlockFilter | None | bool = False  # False: not built yet
         self.reset()
 
     # -- Observer hooks ------------------------------------------------------------------------
     def _reset(self) -> None:
         self._x = np.zeros(7)
         if not self.steady_state:
+            from filterpy.kalman import KalmanFilter  # only here: importing filterpy pulls in scipy.stats
+
             kf = KalmanFilter(dim_x=7, dim_z=4)
             kf.F, kf.H, kf.Q, kf.R = self.F, self.H, self.Q, self.R
             kf.P = self.P0.copy()
@@ -263,6 +265,52 @@ class AlignmentKalmanFilter(Observer):
             self._x = x + self.K @ (zb - self.H @ x)
         else:
             self._kf.update(zb)
+
+    def step_block(self, t: np.ndarray, Z: np.ndarray, U: np.ndarray | None = None,
+                   mask: np.ndarray | None = None, out: np.ndarray | None = None) -> np.ndarray:
+        """:meth:`Observer.step_block`: the fixed-gain filter runs each stretch of samples one
+        ``dt`` apart with every sensor present as one compiled call
+        (:mod:`railfmu.estimators.core.fixed_gain`, equal bit for bit to :meth:`step`); any other
+        sample (the first, a gap, a missing sensor) goes through :meth:`step`."""
+        t = np.asarray(t, dtype=float)
+        n = t.shape[0]
+        if out is None:
+            out = np.empty((n, len(self.outputs)))
+        self.prepare()
+        Z = np.asarray(Z, dtype=float)
+        if self._block is None or n == 0 or Z.shape != (n, 3):
+            return super().step_block(t, Z, U, mask, out)
+        ok = np.isfinite(Z).all(axis=1)
+        if mask is not None:
+            ok &= np.asarray(mask, dtype=bool).all(axis=1)
+        prev = np.empty(n)
+        prev[0] = np.nan if self._t is None else self._t
+        prev[1:] = t[:-1]
+        d = t - prev
+        steps = np.round(d / self.dt)  # Observer._n_steps: one dt later, within its tolerance
+        ok &= (steps == 1) & (np.abs(d - steps * self.dt) <= _TIME_RTOL * self.dt)
+        i = 0
+        while i < n:
+            if not ok[i]:
+                try:
+                    super().step_block(t[i:i + 1], Z[i:i + 1], None, None if mask is None else mask[i:i + 1],
+                                       out[i:i + 1])
+                except (ArithmeticError, ValueError) as exc:
+                    exc.rows_done = i
+                    raise
+                i += 1
+                continue
+            j = i + int(np.argmin(ok[i:])) if not ok[i:].all() else n
+            self._block.run(self._x, Z[i:j], out[i:j])
+            self._t = float(t[j - 1])
+            self.steps += j - i
+            i = j
+        return out
+
+    def prepare(self) -> None:
+        """Build (load) the compiled fixed-gain recursion of :meth:`step_block`."""
+        if self._block is False:
+            self._block = fixed_gain.block_filter(self.F, self.H, self.K, 3) if self.steady_state else None
 
     def _update_rows(self, rows: tuple[int, ...]) -> None:
         """Update with the rows ``rows`` of ``H`` only (some sensors missing). The fixed-gain

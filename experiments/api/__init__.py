@@ -43,6 +43,7 @@ _LAZY = {
     "read_ssp": "railfmu.experiments.engine.api",
     "parameters": "railfmu.experiments.engine.api",
     "list_experiments": "railfmu.experiments.engine.api",
+    "read_signals": "railfmu.experiments.engine.api",
     "register_study": "railfmu.experiments.engine.studies",
     "Run": "railfmu.experiments.engine.result",
     "Parameter": "railfmu.experiments.engine.parameters",
@@ -54,7 +55,8 @@ __all__ = ["__version__", *_LAZY]
 
 if TYPE_CHECKING:  # what type checkers and IDEs see
     __version__: str
-    from railfmu.experiments.engine.api import export, list_experiments, parameters, read_ssp, run, study
+    from railfmu.experiments.engine.api import (export, list_experiments, parameters, read_signals, read_ssp,
+                                                run, study)
     from railfmu.experiments.engine.parameters import Parameter
     from railfmu.experiments.engine.result import Run
     from railfmu.experiments.engine.studies import register_study

@@ -43,7 +43,8 @@ def _sets(parameters: Mapping[str, Any] | None) -> dict[str, dict[str, Any]]:
 def run(experiment: ExperimentRef, variant: str | None = None, *, parameters: Mapping[str, Any] | None = None,
         seed: int | None = None, master: str | None = None, stop_time: float | None = None,
         step_size: float | None = None, out: str | os.PathLike | None = None, progress: bool = False,
-        log: TextIO | None = None, verbose: bool = False, fmi_version: int = 2) -> Run:
+        log: TextIO | None = None, verbose: bool = False, fmi_version: int = 2,
+        record_format: str = "csv") -> Run:
     """Run one experiment and return its signals, estimates and metrics in memory.
 
     Parameters
@@ -77,6 +78,9 @@ def run(experiment: ExperimentRef, variant: str | None = None, *, parameters: Ma
     fmi_version : int
         2 (default) or 3: run railfmu's FMUs as their FMI 2.0 or FMI 3.0 builds (the same
         model code; the results are equal). An SSP's own packed FMUs run as they are.
+    record_format : str
+        ``"csv"`` (default), ``"parquet"`` or ``"mat"``: the format of the signals and
+        estimates written into ``out`` (:func:`read_signals` reads any of them back).
 
     Returns
     -------
@@ -96,7 +100,8 @@ def run(experiment: ExperimentRef, variant: str | None = None, *, parameters: Ma
     >>> r.metrics["observers"]["alignment"]["xi"]["rms_error"]     # doctest: +SKIP
     """
     r = execute(experiment, variant, out, master, _sets(parameters), seed, stop_time, step_size,
-                progress=progress, log=log, verbose=verbose, fmi_version=fmi_version)
+                progress=progress, log=log, verbose=verbose, fmi_version=fmi_version,
+                record_format=record_format)
     if out is not None:
         r.save(out, log=log)
     return r
@@ -240,3 +245,12 @@ def list_experiments() -> dict[str, dict[str, Any]]:
         out[name] = {"description": exp.description, "variants": exp.variants,
                      "default_variant": exp.default_variant}
     return out
+
+
+def read_signals(path: str | os.PathLike) -> dict[str, "np.ndarray"]:
+    """A run's record — ``signals.csv|.parquet|.mat``, ``estimates.*``, or what a killed run
+    left (``signals.parquet.spool``: its complete rows) — as ``{column: array}``, bit for bit
+    the values the run held. ValueError (one line) for a file it cannot read."""
+    from railfmu.experiments.engine.records import read_signals as read
+
+    return read(path)

@@ -119,7 +119,8 @@ def cmd_run(args) -> int:
         out = Path("out") / exp.name / (args.variant or exp.default_variant or "default")
     log = _log(args)
     run(args.experiment, args.variant, master=args.master, out=out, progress=not args.quiet,
-        log=log if log is not None else _Quiet(), verbose=args.verbose, fmi_version=args.fmi, **_overrides(args))
+        log=log if log is not None else _Quiet(), verbose=args.verbose, fmi_version=args.fmi,
+        record_format=args.format, **_overrides(args))
     return 0
 
 
@@ -259,6 +260,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--out", help="output folder (default out/EXP/VARIANT)")
     p.add_argument("--master", default=None, help=MASTER_HELP)
     _add_fmi(p, "run railfmu's FMUs as their FMI 2.0 (default) or FMI 3.0 builds")
+    p.add_argument("--format", default="csv", choices=("csv", "parquet", "mat"),
+                   help="signals and estimates as CSV (default), Parquet or MATLAB .mat (compact)")
     _add_overrides(p)
     p.set_defaults(fn=cmd_run)
     p = sub.add_parser("study", help="variants x seeds of an experiment, in parallel (Dask) -> table")

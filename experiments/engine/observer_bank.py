@@ -3,9 +3,10 @@
 The SSD declares each observer (``org.railfmu.observers`` annotation, read into
 :class:`railfmu.fmus.cosim.system.ObserverSpec`), its ``class`` a registered estimator name
 (:mod:`railfmu.experiments.engine.registry`). :class:`ObserverBank` instantiates them and, as a
-sink of the master, feeds them the recorded rows — one communication step at a time inside
-the Python masters, row by row from blocks on the container path (observers are passive, so
-both see the same samples):
+sink of the master, feeds them the recorded rows in blocks (both the Python masters and the
+container hand over blocks: observers are passive, so they see the same samples either way),
+each observer its sample rows of a block in one ``step_block`` call, bit for bit what
+``step`` row by row gives:
 
 * **units**: every measurement and known input arrives in the unit the observer declares,
   converted from the unit of the signal it is bound to (``dst = a src + b``); incompatible
@@ -44,9 +45,10 @@ from pathlib import Path
 
 import numpy as np
 
+from railfmu.estimators.core.observer import Observer
 from railfmu.estimators.track.metrics import rms
 from railfmu.experiments.engine import registry
-from railfmu.experiments.engine.recorder import CsvRecorder
+from railfmu.experiments.engine import records
 from railfmu.fmus.cosim.system import ObserverSpec, System
 from railfmu.models.errors import UserError
 from railfmu.fmus.ssp.units import OURS, Units, conversion
@@ -212,7 +214,7 @@ class ObserverBank:
     as the rows arrive (``estimates.csv``), the offline ones after a complete run
     (``estimates_<name>.csv`` beside it)."""
 
-    def __init__(self, system: System, out_csv: Path | None):
+    def __init__(self, system: System, out_csv: Path | None, record_format: str = "csv"):
         where = str(system.source or system.name)
         self.where = where
         self.step_size = system.step_size
@@ -229,11 +231,14 @@ class ObserverBank:
                                   for k in obs.measurements])
             feed.u_map = _affine([unit_map(spec, obs, "input", k, spec.inputs[k], where) for k in obs.inputs])
             feed.truth_map = {k: unit_map(spec, obs, "truth", k, s, where) for k, s in spec.truth.items()}
+            if not spec.offline and callable(getattr(obs, "prepare", None)):  # a compiled kernel: loaded
+                obs.prepare()                                                    # in the set-up, not at the first sample
             (self.offline if spec.offline else self.online).append(feed)
         self.out_csv = out_csv
-        self.recorder = CsvRecorder(out_csv) if out_csv is not None else None
+        self.record_format = record_format  # csv, parquet or mat (railfmu.experiments.engine.records)
+        self.recorder = records.recorder(out_csv, record_format) if out_csv is not None else None
         self.times: list[float] = []
-        self.estimates: list[np.ndarray] = []  # one (n_outputs_total,) row per recorded row
+        self.estimates: list[np.ndarray] = []  # blocks (rows, n_outputs_total), one row per recorded row
         self.results: dict[str, tuple[np.ndarray, np.ndarray]] = {}  # offline: name -> (t, X)
         self._arrays: tuple[np.ndarray, np.ndarray] | None = None
 
@@ -283,28 +288,67 @@ class ObserverBank:
             self.recorder.open(["time", *self.columns])
 
     def write(self, row: np.ndarray) -> None:
-        t, k = float(row[0]), self._row
-        self._row += 1
-        for f in self.online:
-            if k == 0 and f.iset:
-                bind_settings(f, row, f.iset, self.where)
-                f.obs.reset(0.0)
-            if k % f.stride == 0 and f.failed is None:
-                Z, U, mask = f.sample(row[None, :])
-                t0 = time.perf_counter()
-                try:
-                    f.estimate = f.obs.step(t, Z[0], None if U is None else U[0],
-                                            None if mask is None else mask[0])
-                except (ArithmeticError, ValueError) as exc:  # numerical failure (LinAlgError is a ValueError)
-                    self._fail(f, t, exc)
-                f.seconds += time.perf_counter() - t0
-        est = np.concatenate([f.estimate for f in self.online]) if self.online else np.empty(0)
-        self.times.append(t)
-        self.estimates.append(est)
+        self.write_block(row[None, :])
+
+    def write_block(self, rows: np.ndarray) -> None:
+        """A block of recorded rows: each online observer gets its sample rows of the block in
+        one :meth:`Observer.step_block` call (units, masks and valid flags per block), and the
+        estimates of every row (each held between its observer's samples) go out as one block."""
+        m, k0 = rows.shape[0], self._row
+        if m == 0:
+            return
+        self._row += m
+        t = rows[:, 0]
+        self.times.extend(t.tolist())
         if self.offline:
-            self._record.append(row[self._kept])
+            self._record.append(rows[:, self._kept])
+        if not self.online:  # offline observers only (a Monte Carlo of a smoother): nothing per row
+            if self.recorder is not None:
+                self.recorder.write_block(rows[:, :1])
+            return
+        parts = [self._feed_block(f, rows, k0) for f in self.online]
+        est = np.concatenate(parts, axis=1) if len(parts) > 1 else parts[0]
+        self.estimates.append(est)
         if self.recorder is not None:
-            self.recorder.write(np.concatenate(([t], est)))
+            self.recorder.write_block(np.column_stack([t, est]))
+
+    def _feed_block(self, f: _Feed, rows: np.ndarray, k0: int) -> np.ndarray:
+        """``f``'s estimates on every row of ``rows`` (global row ``k0`` first)."""
+        m = rows.shape[0]
+        first = (-k0) % f.stride  # the block's first sample row of this observer
+        if k0 == 0 and f.iset:
+            bind_settings(f, rows[0], f.iset, self.where)
+            f.obs.reset(0.0)
+        held = np.empty((m, len(f.obs.outputs)))
+        if first >= m:
+            held[:] = f.estimate
+            return held
+        if first:
+            held[:first] = f.estimate
+        at = slice(first, None, f.stride)
+        sampled = rows[at]
+        n = sampled.shape[0]
+        X = held[first:] if f.stride == 1 else np.empty((n, len(f.obs.outputs)))
+        if f.failed is None:
+            Z, U, mask = f.sample(sampled)
+            t0 = time.perf_counter()
+            try:
+                step_block = getattr(f.obs, "step_block", None)
+                if step_block is None:  # a plug-in's estimator with step only: row by row
+                    Observer.step_block(f.obs, sampled[:, 0], Z, U, mask, out=X)
+                else:
+                    step_block(sampled[:, 0], Z, U, mask, out=X)
+            except (ArithmeticError, ValueError) as exc:  # numerical failure (LinAlgError is a ValueError)
+                i = getattr(exc, "rows_done", 0)
+                self._fail(f, float(sampled[i, 0]), exc)
+                X[i:] = np.nan
+            f.seconds += time.perf_counter() - t0
+        else:
+            X[:] = np.nan
+        f.estimate = X[-1].copy()
+        if f.stride > 1:  # held between samples
+            held[first:] = np.repeat(X, f.stride, axis=0)[:m - first]
+        return held
 
     def _fail(self, f: _Feed, t: float, exc: Exception) -> None:
         """One estimator that fails numerically does not end the run nor lose the others'
@@ -313,19 +357,6 @@ class ObserverBank:
         f.estimate = np.full(len(f.obs.outputs), np.nan)
         print(f"railfmu: warning: {self.where}: Observer {f.spec.name!r} failed ({f.failed}); its estimates "
               "are NaN from there on", file=sys.stderr)
-
-    def write_block(self, rows: np.ndarray) -> None:
-        if self.online:
-            for row in rows:
-                self.write(row)
-            return
-        # offline observers only (a Monte Carlo of a smoother): nothing to do per row
-        self.times.extend(rows[:, 0].tolist())
-        self._row += rows.shape[0]
-        if self.offline:
-            self._record.append(rows[:, self._kept])
-        if self.recorder is not None:
-            self.recorder.write_block(rows[:, :1])
 
     def close(self, complete: bool) -> None:
         if self.recorder is not None:
@@ -354,10 +385,10 @@ class ObserverBank:
             f.seconds = time.perf_counter() - t0
             self.results[f.spec.name] = (rows[:, 0], X)
             if self.out_csv is not None:
-                rec = CsvRecorder(self.out_csv.parent / f"estimates_{f.spec.name}.csv")
-                rec.open(["time", *(f"{f.spec.name}.{o}" for o in f.obs.outputs)])
-                rec.write_block(np.column_stack([rows[:, 0], X]))
-                rec.close(True)
+                records.write_table(records.record_path(self.out_csv.parent, f"estimates_{f.spec.name}",
+                                                        self.record_format),
+                                    ["time", *(f"{f.spec.name}.{o}" for o in f.obs.outputs)],
+                                    np.column_stack([rows[:, 0], X]))
 
     def arrays(self) -> tuple[np.ndarray, np.ndarray]:
         """The online estimates: times and one row of every online observer's outputs (stacked

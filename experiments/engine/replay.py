@@ -144,6 +144,35 @@ def read_replay(component, file: str, units: dict) -> ReplayFile:
     return out
 
 
+_BINARY = (".parquet", ".mat", ".spool")
+
+
+def _binary_to_csv(system, component, file: str) -> None:
+    """A replay's Parquet or .mat table (or a killed run's spool): the SignalTable FMU's C reader
+    reads CSV, so the table is written once as a CSV (``repr`` floats: the same values bit for
+    bit) into a temporary folder removed when the process ends, and the component plays that."""
+    path = Path(file)
+    if path.suffix.lower() not in _BINARY or not path.is_file():
+        return
+    import atexit
+    import shutil
+    import tempfile
+
+    from railfmu.experiments.engine.records import read_table, write_table
+
+    try:
+        columns, data = read_table(path)
+    except ValueError as exc:
+        raise UserError(f"{component.name}.file {exc}") from None
+    folder = Path(tempfile.mkdtemp(prefix="railfmu-replay-"))
+    atexit.register(shutil.rmtree, folder, True)
+    csv_path = folder / f"{path.stem}.csv"
+    write_table(csv_path, columns, data, "csv")
+    component.parameters["file"] = str(csv_path)
+    system.notes.append(f"{component.name}.file {path} is {path.suffix[1:]}: played as the CSV table {csv_path} "
+                        "(the SignalTable FMU reads CSV)")
+
+
 def _text(path: Path, component) -> str:
     """The file's text; a relative path is the FMU's own ``resources/`` (an exported .ssp)."""
     if not path.is_absolute() and not path.is_file():
@@ -256,6 +285,9 @@ def shape_replays(system, study=None) -> dict:
     found = replays_of(system)
     if not found:
         return {}
+    for c, f in found:
+        _binary_to_csv(system, c, f)
+    found = replays_of(system)
     units = {s: u for o in system.observers for s, u in o.units.items()}
     files = [read_replay(c, f, units) for c, f in found]
     info: dict = {"files": {}, "unscored": []}

@@ -60,7 +60,8 @@ class Run:
 
     def __init__(self, exp: Experiment, system: System, variant: str | None, master: str,
                  columns: list[str], data: np.ndarray, bank: ObserverBank, run_data: RunData,
-                 series: dict[str, np.ndarray] | None = None, streamed: Path | None = None):
+                 series: dict[str, np.ndarray] | None = None, streamed: Path | None = None,
+                 record_format: str = "csv"):
         self.experiment: str = exp.name
         self.variant = variant
         self.master = master
@@ -71,6 +72,7 @@ class Run:
         self._exp, self._columns, self._data, self._bank = exp, columns, data, bank
         self._run_data = run_data
         self._streamed = streamed  # the folder signals.csv and estimates.csv were written to while running
+        self.record_format = record_format  # the format they were streamed in
         self._plots: list[str] = []
 
     def __repr__(self) -> str:
@@ -123,13 +125,16 @@ class Run:
         """The run's report.md as markdown (figures linked once :meth:`save` has drawn them)."""
         return report_md(self._exp, self.system, self.metrics, self._plots)
 
-    def save(self, folder: str | Path, log: TextIO | None = None) -> list[str]:
+    def save(self, folder: str | Path, log: TextIO | None = None, format: str | None = None) -> list[str]:
         """Write the run's files into ``folder``, as ``railfmu run --out`` does.
 
         Parameters
         ----------
         folder : str or pathlib.Path
             Created if missing.
+        format : str, optional
+            ``"csv"``, ``"parquet"`` or ``"mat"`` for the signals and estimates (default: the
+            format the run streamed in, else csv); read back with :func:`railfmu.read_signals`.
         log : file, optional
             Where the ``wrote ...`` line goes (default: nowhere).
 
@@ -141,9 +146,13 @@ class Run:
         """
         from railfmu.experiments.engine.files import ensure_folder, write_atomic
 
+        from railfmu.experiments.engine.records import check_format
+
+        fmt = check_format(format or self.record_format)
         out = ensure_folder(folder)
-        if self._streamed is None or self._streamed.resolve() != out.resolve():
-            self._write_csvs(out)
+        if (self._streamed is None or self._streamed.resolve() != out.resolve()
+                or fmt != self.record_format):
+            self._write_csvs(out, fmt)
         exp, system, metrics, bank = self._exp, self.system, self.metrics, self._bank
         # atomic: a run killed while writing leaves no metrics.json rather than half of one
         write_atomic(out / "metrics.json", json.dumps(metrics, indent=2, default=json_default) + "\n")
@@ -161,30 +170,24 @@ class Run:
                        + plot_estimates(bank, rd.signals, units, out)
                        + exp.study.figures(RunData(rd.signals, rd.estimates, base, roles, rd.observers), out))
         write_atomic(out / "report.md", self.report())
-        offline = [f"estimates_{name}.csv" for name in bank.results]
-        written = ["signals.csv", "estimates.csv", *offline, *files, "metrics.json", "report.md", *self._plots]
+        offline = [f"estimates_{name}.{fmt}" for name in bank.results]
+        written = [f"signals.{fmt}", f"estimates.{fmt}", *offline, *files, "metrics.json", "report.md", *self._plots]
         if log is not None:
             print(f"wrote {out}/: {', '.join(written)}", file=log)
         return written
 
-    def _write_csvs(self, out: Path) -> None:
-        """signals.csv and the estimates' CSVs from memory, with the writer of a streamed run."""
-        from railfmu.experiments.engine.recorder import CsvRecorder
+    def _write_csvs(self, out: Path, fmt: str = "csv") -> None:
+        """The signals and estimates from memory in ``fmt``, with the writer of a streamed run."""
+        from railfmu.experiments.engine.records import record_path, write_table
 
-        def write(path: Path, columns: list[str], rows: np.ndarray, types=None) -> None:
-            rec = CsvRecorder(path, types=types)
-            rec.open(columns)
-            rec.write_block(rows)
-            rec.close(True)
-
-        write(out / "signals.csv", self._columns, self._data, self.system.signal_types())
+        write_table(record_path(out, "signals", fmt), self._columns, self._data, fmt, self.system.signal_types())
         bank = self._bank
         t, est = bank.arrays()
-        write(out / "estimates.csv", ["time", *bank.columns], np.column_stack([t, est]))
+        write_table(record_path(out, "estimates", fmt), ["time", *bank.columns], np.column_stack([t, est]), fmt)
         outputs = {name: obs.outputs for name, obs in bank.estimators().items()}
         for name, (t_off, X) in bank.results.items():
-            write(out / f"estimates_{name}.csv", ["time", *(f"{name}.{o}" for o in outputs[name])],
-                  np.column_stack([t_off, X]))
+            write_table(record_path(out, f"estimates_{name}", fmt), ["time", *(f"{name}.{o}" for o in outputs[name])],
+                        np.column_stack([t_off, X]), fmt)
 
 
 def report_md(exp: Experiment, system: System, metrics: dict, plots: list[str]) -> str:

@@ -108,7 +108,8 @@ def execute(name: str | Path, variant: str | None = None, out: Path | str | None
             master: str | None = None, sets: dict | None = None, seed: int | None = None,
             stop_time: float | None = None, step_size: float | None = None, progress: bool = True,
             log: TextIO | None = sys.stderr, warn: Callable[[str], None] | None = None,
-            series: bool = False, verbose: bool = False, fmi_version: int = 2) -> Run:
+            series: bool = False, verbose: bool = False, fmi_version: int = 2,
+            record_format: str = "csv") -> Run:
     """Run one variant in memory and return the :class:`Run`. ``out``: stream signals.csv and
     estimates.csv into that folder as the run goes (an interrupted run keeps its complete
     rows); the other files are :meth:`Run.save`'s. ``log``: the progress lines (None: none);
@@ -116,9 +117,10 @@ def execute(name: str | Path, variant: str | None = None, out: Path | str | None
     ``series``: keep the study's per-run arrays (:meth:`Study.series`) in ``Run.series``.
     ``master`` None: the one the experiment prefers (``<rf:FixedStep master=...>``), else jacobi.
     ``fmi_version``: run railfmu's own FMUs as FMI 2.0 (default) or 3.0 builds; an SSP's
-    packed FMUs run as they are."""
+    packed FMUs run as they are. ``record_format``: csv, parquet or mat for the signals and
+    estimates (:mod:`railfmu.experiments.engine.records`)."""
     from railfmu.fmus.cosim.masters import MASTERS, run
-    from railfmu.experiments.engine.recorder import CsvRecorder
+    from railfmu.experiments.engine import records
 
     from railfmu.experiments.engine.observer_bank import ObserverBank
 
@@ -126,6 +128,7 @@ def execute(name: str | Path, variant: str | None = None, out: Path | str | None
         warn = (lambda line: print(line, file=log)) if log is not None else _python_warning
     say = (lambda line: print(line, file=log)) if log is not None else (lambda line: None)
     t_setup = time.perf_counter()
+    records.check_format(record_format)
     if master is not None and master not in MASTERS:
         raise UserError(f"--master {master!r}: choose one of {', '.join(MASTERS)}")
     exp = find_experiment(name)
@@ -156,20 +159,22 @@ def execute(name: str | Path, variant: str | None = None, out: Path | str | None
             say(f"  observer {o.name}: {o.cls}{' (offline)' if o.offline else ''}"
                 f"{'' if o.enabled else ' (switched off)'}")
 
-    recorder = CsvRecorder(out / "signals.csv", types=system.signal_types()) if out is not None else None
-    bank = ObserverBank(system, out / "estimates.csv" if out is not None else None)
+    signals_file = records.record_path(out, "signals", record_format) if out is not None else None
+    recorder = records.recorder(signals_file, record_format, types=system.signal_types()) if out is not None else None
+    bank = ObserverBank(system, records.record_path(out, "estimates", record_format) if out is not None else None,
+                        record_format)
     setup_s = time.perf_counter() - t_setup
     try:
         result = run(system, master=master, sinks=[s for s in (recorder, bank) if s is not None], progress=progress)
     except UserError as exc:
         if recorder is None or recorder.rows_written == 0:  # nothing (or a bare header) written: cite no file
             raise
-        raise UserError(f"{exc} (partial results: {out / 'signals.csv'}, {recorder.rows_written} rows "
+        raise UserError(f"{exc} (partial results: {signals_file}, {recorder.rows_written} rows "
                         f"up to t = {recorder.last_time:g} s)") from None
     except KeyboardInterrupt:
         if recorder is not None:
             t = recorder.last_time
-            warn(f"railfmu: interrupted at t = {t if t is not None else 0:g} s; {out / 'signals.csv'} "
+            warn(f"railfmu: interrupted at t = {t if t is not None else 0:g} s; {signals_file} "
                  f"holds {recorder.rows_written} complete rows")
         raise
 
@@ -185,7 +190,7 @@ def execute(name: str | Path, variant: str | None = None, out: Path | str | None
         notes = [n for n in notes if n != early_end] + [f"the run ended at the replay's last row: {early_end}"]
         early_end = None
     if early_end:
-        kept = f"; {out / 'signals.csv'} holds every row up to t = {result.end_time:g} s" if recorder else ""
+        kept = f"; {signals_file} holds every row up to t = {result.end_time:g} s" if recorder else ""
         warn(f"railfmu: early end: {result.early_end}{kept}")
     simulated = result.end_time - system.start_time
     metrics = {
@@ -225,7 +230,8 @@ def execute(name: str | Path, variant: str | None = None, out: Path | str | None
     if verbose:
         say(f"  timing: setup {setup_s:.2f} s, stepping {result.wall_time_s:.2f} s, study metrics "
             f"{metrics['timing_s']['study_metrics']:.2f} s")
-    return Run(exp, system, variant, master, result.columns, result.data, bank, data, arrays, streamed=out)
+    return Run(exp, system, variant, master, result.columns, result.data, bank, data, arrays, streamed=out,
+               record_format=record_format)
 
 
 def _unscore(observers: dict, system, unscored: list[str]) -> None:

@@ -77,7 +77,7 @@ from railfmu.fmus.cosim.system import Connection, Sink, System, check_system, re
 
 MASTERS = ("jacobi", "gauss-seidel", "container")
 BLOCK_ROWS = 1000  # container path: rows per C call / per write_block
-HAND_OVER_ROWS = 1  # Python masters: rows checked (finite) and handed to the sinks at once; 1 = every step, as an online observer expects
+HAND_OVER_ROWS = 500  # Python masters: rows checked (finite) and handed to the sinks at once (observers are passive); 1 if a sink sets every_step
 
 _c_uint_p = ctypes.POINTER(ctypes.c_uint)
 _c_double_p = ctypes.POINTER(ctypes.c_double)
@@ -469,16 +469,19 @@ def _run_python(system: System, master: str, sinks: Sequence[Sink], progress: bo
             sink.open(columns)
             opened.append(sink)
 
+        every = 1 if any(getattr(s, "every_step", False) for s in opened) else HAND_OVER_ROWS
+
         def hand_over(upto: int) -> None:
-            """Check rows sent .. upto-1 (all finite) and pass them to the sinks, row by row;
-            in blocks, because a per-row numpy check would cost more than the FMUs."""
+            """Check rows sent .. upto-1 (all finite) and pass them to the sinks as one block;
+            in blocks, because a per-row numpy check (and a per-row observer step) would cost
+            more than the FMUs."""
             nonlocal sent
             block = data[sent:upto]
             bad = ~np.isfinite(block).all(axis=1) if not np.isfinite(block).all() else None
             stop_at = sent + int(np.argmax(bad)) if bad is not None else upto
-            for j in range(sent, stop_at):
+            if stop_at > sent:
                 for sink in opened:
-                    sink.write(data[j])
+                    sink.write_block(data[sent:stop_at])
             sent = stop_at
             if bad is not None:
                 raise _non_finite(columns, data[stop_at])
@@ -504,7 +507,7 @@ def _run_python(system: System, master: str, sinks: Sequence[Sink], progress: bo
                     for link in links:  # consistent sample: every input from its source at t
                         link.transfer(t)
                     sampler.sample(k, t)
-                if k % HAND_OVER_ROWS == 0:
+                if k % every == 0:
                     hand_over(k + 1)
                     bar.update(t)
         except _Terminated as end:  # a normal end: the rows so far are the result
@@ -722,8 +725,9 @@ def _ctypes_steps(sig: _Signals, f: _Fmu, t_fmu, h, start, k0, m, data) -> tuple
 def run(system: System, master: str = "jacobi", sinks: Sequence[Sink] = (), progress: bool = True) -> RunResult:
     """Run ``system`` with ``master`` (one of :data:`MASTERS`), feeding ``sinks`` as it goes.
 
-    Sinks get ``open(columns)``, then the rows (``write`` per sample from the Python
-    masters, ``write_block`` from the container), then ``close(complete)``. An FMU that ends
+    Sinks get ``open(columns)``, then the rows (``write_block``: the Python masters every
+    :data:`HAND_OVER_ROWS` steps, or every step when a sink sets ``every_step``; the container
+    per C call), then ``close(complete)``. An FMU that ends
     the simulation (fmi2Discard + fmi2Terminated) ends the run normally at that communication
     point: ``RunResult.early_end`` says who and when, the sinks close as complete. On an error
     (UserError: a failed FMU call with what the FMU logged, a non-finite sample) or

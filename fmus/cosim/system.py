@@ -351,9 +351,11 @@ class Sink(Protocol):
     """Receives the recorded samples of a run: the CSV recorder, observers.
 
     ``columns`` are ``time`` followed by the recorded signals; Integer and Boolean signals
-    arrive as numbers (0/1 for Boolean) in the same float rows. Masters that step in Python
-    call :meth:`write` once per communication point; the container path calls
-    :meth:`write_block` with many rows at once. ``close(complete)`` says whether the run
+    arrive as numbers (0/1 for Boolean) in the same float rows. Every master calls
+    :meth:`write_block` with many rows at once (the Python masters every few hundred
+    communication points, the container path per C call); a sink whose class sets
+    ``every_step = True`` (one that must see each point before the next step) gets each row
+    as soon as it is sampled. ``close(complete)`` says whether the run
     ended normally: at its stop time, or earlier because an FMU ended the simulation
     (fmi2Discard + fmi2Terminated); then the rows up to that time are all there.
     """
