@@ -92,6 +92,7 @@ def test_monte_carlo_members_share_one_cached_container(tmp_path, monkeypatch):
     from railfmu.experiments.engine.runner import find_experiment, load_system
 
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
+    monkeypatch.delenv("RAILFMU_CACHE", raising=False)  # it would win over XDG_CACHE_HOME
     exp = find_experiment("lateral_alignment")
     runs = {}
     # and an Integer and a Boolean value other than the variant's: no noise, PSD level 2
