@@ -25,8 +25,9 @@ SSPS = {
 
 def reference_fmu(model: str, out_dir: Path, fmi_version: int = 2) -> Path:
     """``out_dir/<model>.fmu``: the Reference-FMU ``model`` for FMI ``fmi_version`` (2 or 3) as
-    a source-only FMU, its sources compiled as one file the way the Reference-FMUs' own FMI 2
-    packaging does (``all.c``)."""
+    a source-only FMU, its sources compiled as one file (``all.c``) with DISABLE_PREFIX, as the
+    Reference-FMUs' own build of their binaries does (without it, the FMI 2 functions get the
+    ``<modelIdentifier>_`` prefix of a statically linked source FMU)."""
     src = REFERENCE / model
     out = Path(out_dir) / (f"{model}.fmu" if fmi_version == 2 else f"{model}3.fmu")
     functions = f"fmi{fmi_version}Functions.c"
@@ -34,7 +35,7 @@ def reference_fmu(model: str, out_dir: Path, fmi_version: int = 2) -> Path:
         z.writestr(zipfile.ZipInfo("modelDescription.xml", (2024, 1, 1, 0, 0, 0)),
                    (src / f"FMI{fmi_version}.xml").read_bytes())
         # fixed dates: the same bytes every time, so railfmu's compiled copy is reused
-        z.writestr(zipfile.ZipInfo("sources/all.c", (2024, 1, 1, 0, 0, 0)), f"#define FMI_VERSION {fmi_version}\n"
+        z.writestr(zipfile.ZipInfo("sources/all.c", (2024, 1, 1, 0, 0, 0)), f"#define FMI_VERSION {fmi_version}\n#define DISABLE_PREFIX\n"
                    f'#include "{functions}"\n#include "model.c"\n#include "cosimulation.c"\n')
         if fmi_version == 3:
             z.writestr(zipfile.ZipInfo("sources/buildDescription.xml", (2024, 1, 1, 0, 0, 0)),

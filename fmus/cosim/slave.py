@@ -68,6 +68,18 @@ def _unzipped(fmu: Path) -> str:
     return folder
 
 
+def _load_failure(exc: Exception) -> str:
+    """What FMPy's loader raised, as one line naming the FMI function when one is missing."""
+    import re
+
+    text = " ".join(str(exc).split())
+    m = re.search(r"undefined symbol: (\w+)", text)
+    if m:
+        return (f"its binary does not export the FMI function {m.group(1)} (a source FMU compiled with "
+                "prefixed function names, or an incomplete FMI implementation)")
+    return f"cannot load its binary: {text}"
+
+
 class Slave:
     """An instantiated FMI 2.0 co-simulation FMU; ``messages`` holds (status, category, text)."""
 
@@ -85,9 +97,12 @@ class Slave:
         self.dir = _unzipped(fmu)
         self._shared_dir = self.dir  # not removed by close (_UNZIPPED)
         self.messages: list[tuple[str, str, str]] = []
-        self.fmu = FMU2Slave(guid=self.md.guid, unzipDirectory=self.dir,
-                             modelIdentifier=self.md.coSimulation.modelIdentifier,
-                             instanceName=instance_name)
+        try:
+            self.fmu = FMU2Slave(guid=self.md.guid, unzipDirectory=self.dir,
+                                 modelIdentifier=self.md.coSimulation.modelIdentifier,
+                                 instanceName=instance_name)
+        except (AttributeError, OSError) as exc:  # a binary that lacks an FMI function, or will not load
+            raise FMUError(f"{fmu.name} ({instance_name}): {_load_failure(exc)}") from None
         self._callbacks = self._make_callbacks()
         self.fmu.instantiate(callbacks=self._callbacks, loggingOn=logging_on)
 

@@ -110,7 +110,14 @@ def read_system(path, variant: str | None = None, fmu_dirs=(), overrides: dict[s
     """The system of an SSP (a ``.ssd``, a folder holding ``SystemStructure.ssd``, or a
     ``.ssp``) with ``variant`` (a name in ``variants/`` or a path to an ``.ssv``) and
     ``overrides`` ({component: {parameter: value}}) applied. FMUs missing from the SSP are
-    looked up by file name in ``fmu_dirs``. Time arguments override the SSD's."""
+    looked up by file name in ``fmu_dirs``. Time arguments override the SSD's. A single
+    ``.fmu`` is a system of its own (:func:`railfmu.fmus.ssp.single_fmu.system_of_fmu`)."""
+    if _is_fmu(path):
+        from railfmu.fmus.ssp.single_fmu import system_of_fmu
+
+        if variant is not None:
+            raise UserError(f"{path}: a single FMU has no variants (--set sets its parameters)")
+        return system_of_fmu(path, overrides, start_time, stop_time, step_size)
     root = locate(path)
     try:
         system = _Reader(root, fmu_dirs).read(variant, overrides or {}, (start_time, stop_time, step_size))
@@ -125,6 +132,8 @@ def read_system(path, variant: str | None = None, fmu_dirs=(), overrides: dict[s
 def study_name(path) -> str | None:
     """The study an SSP names (our ``org.railfmu.study`` annotation, ``<rf:Study name=...>``),
     or None; reads the SSD only, without FMUs or schema."""
+    if _is_fmu(path):
+        return None
     root = locate(path)
     system = parse_xml(root.ssd, root.show(root.ssd)).find("ssd:System", NS)
     return _study(system) if system is not None else None
@@ -138,7 +147,11 @@ def _study(system_el) -> str | None:
 
 def list_variants(path) -> list[str]:
     """The names of ``variants/*.ssv`` of an experiment folder, ``.ssd`` or ``.ssp``, sorted."""
-    return _variants(locate(path))
+    return [] if _is_fmu(path) else _variants(locate(path))
+
+
+def _is_fmu(path) -> bool:
+    return Path(path).suffix.lower() == ".fmu" and Path(path).is_file()
 
 
 def _variants(root: Root) -> list[str]:
