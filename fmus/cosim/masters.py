@@ -698,5 +698,15 @@ def run(system: System, master: str = "jacobi", sinks: Sequence[Sink] = (), prog
     if master not in MASTERS:
         raise UserError(f"unknown master {master!r}; choose one of {', '.join(MASTERS)}")
     if master == "container":
-        return _run_container(system, sinks, progress)
+        from railfmu.fmus.cosim.trial import container_refusal
+
+        why = container_refusal(system)
+        if why is None:
+            return _run_container(system, sinks, progress)
+        line = f"container master not used: {why}; running the Jacobi master instead"
+        system.warnings.append(line)
+        print(f"railfmu: warning: {line}", file=sys.stderr)
+        result = _run_python(system, "jacobi", sinks, progress)
+        result.notes.insert(0, line)
+        return result
     return _run_python(system, master, sinks, progress)
