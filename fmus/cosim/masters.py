@@ -92,6 +92,14 @@ class RunResult:
     step_size_from: str | None = None  # where the step size came from (System.step_size_from)
 
 
+def fmu_stop_time(stop: float, h: float) -> float:
+    """The stop time the FMUs are told (fmi2SetupExperiment): the run's, plus a millionth of a
+    step. The last step starts at start + (n-1) h, and start + (n-1) h + h can exceed the stop
+    time by an ulp; an FMU that checks its steps against its stop time (OpenModelica's) then
+    refuses the last step with fmi2Error, where OMSimulator's run reaches the end."""
+    return stop + 1e-6 * h
+
+
 class _Terminated(Exception):
     """fmi2DoStep from ``t`` returned fmi2Discard and the FMU says it terminated."""
 
@@ -406,7 +414,7 @@ def _run_python(system: System, master: str, sinks: Sequence[Sink], progress: bo
     try:
         for comp in system.components:
             s = slaves[comp.name] = Slave(comp.fmu, comp.name, md=comp.md)
-            s.enter_initialization(start, stop)
+            s.enter_initialization(start, fmu_stop_time(stop, h))
             for name, value in comp.parameters.items():
                 s.set(name, value)
         fmus = {name: _Fmu(s) for name, s in slaves.items()}
@@ -547,7 +555,7 @@ def _run_container(system: System, sinks: Sequence[Sink], progress: bool) -> Run
             v = names[signal]
             typed[v.type][0].append(v.valueReference)
             typed[v.type][1].append(col)
-        slave.enter_initialization(start, stop)
+        slave.enter_initialization(start, fmu_stop_time(stop, h))
         apply_parameters(slave, values)
         slave.exit_initialization()
         f = _Fmu(slave)
