@@ -240,9 +240,14 @@ class _Reader:
         for el, comp in elements:  # component level: bare names
             for v in self._bindings(el, f"Component {comp.name!r}"):
                 self._set(comp, v)
-        for v in self._bindings(self.system, ""):
-            if not self._alias(v.name, v.value, v.where):  # a system connector's value, else component.param
+        ported = []  # values of system connectors (so far the only aliases): after every binding,
+        for v in self._bindings(self.system, ""):  # since the connection to a target outranks its binding
+            if v.name in self.aliases:
+                ported.append(v)
+            else:
                 self._set(*self._split(v))
+        for v in ported:
+            self._alias(v.name, v.value, v.where)
         record, observers = self._annotations()
         self.observers = {o.name: o for o in observers}
         self._aliases()
