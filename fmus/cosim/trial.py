@@ -58,8 +58,14 @@ def container_refusal(system: System) -> str | None:
 
 
 def _trial(system: System, writer) -> None:
+    import faulthandler
+
     from railfmu.fmus.cosim.masters import _run_container
 
+    faulthandler.disable()  # a crash is the finding, said by the parent in one line
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    os.dup2(devnull, 1)  # what the FMUs print on their way down stays out of the user's terminal
+    os.dup2(devnull, 2)
     code = 0
     try:
         _run_container(system, [], False)
