@@ -173,3 +173,36 @@ def test_a_missing_fmi_function_is_one_line(reference_dir, tmp_path):
         run(read_system(prefixed), "jacobi", progress=False)
     msg = str(info.value)
     assert "\n" not in msg and "Dahlquist.fmu" in msg and "fmi2" in msg and "does not export" in msg, msg
+
+
+def test_validate_separates_conformance_from_railfmu_packaging(reference_dir, tmp_path):
+    import zipfile
+
+    from railfmu.fmus.generate.build import describe, validate
+    from railfmu.fmus.ssp import validate_ssp
+
+    add = SSPS["omsimulator/LinearTransformation"] / "resources" / "Add.fmu"
+    # a conformant OpenModelica FMU (linux64 binary, no sources) and a source-only Reference-FMU
+    assert validate(add) == []
+    assert validate(reference_fmu("Dahlquist", reference_dir)) == []
+    # railfmu's packaging rules only on request for another tool's FMU
+    assert validate(add, packaging=True) == ["no C sources in sources/ (railfmu's packaging)"]
+    assert describe(SSPS["libcosim/linear_transformation"].parents[1] / "fmi1" / "identity.fmu") \
+        == "FMI 1.0 Co-Simulation"
+    # a folder and the same files zipped as .ssp validate alike
+    for case in ("omsimulator/LinearTransformation", "omsimulator/import_export_parameters1"):
+        ssp = tmp_path / f"{case.rpartition('/')[2]}.ssp"
+        with zipfile.ZipFile(ssp, "w") as z:
+            for p in sorted(SSPS[case].rglob("*")):
+                if p.is_file():
+                    z.write(p, p.relative_to(SSPS[case]).as_posix())
+        assert validate_ssp(SSPS[case]) == [] == validate_ssp(ssp), case
+
+
+@pytest.mark.slow  # FMPy takes ~30 s to validate CraneController.fmu
+def test_validate_checks_the_fmus_an_ssd_names_outside_its_folder():
+    from railfmu.fmus.ssp import validate_ssp
+
+    # 20-sim's crane FMUs lack the InitialUnknowns FMPy expects: a conformance finding, per FMU
+    problems = validate_ssp(SSPS["libcosim/demo"])
+    assert len(problems) == 2 and all("ModelStructure/InitialUnknowns" in p for p in problems), problems

@@ -23,7 +23,9 @@ TRIAL_TIMEOUT_S = 120.0
 
 
 def built_by_railfmu(md) -> bool:
-    return (md.generationTool or "").split(" ")[0] == "railfmu"
+    from railfmu.fmus.generate.codegen import GENERATOR
+
+    return (md.generationTool or "").split(" ")[0] == GENERATOR
 
 
 def container_refusal(system: System) -> str | None:

@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import difflib
 import math
+import os
 import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -159,11 +160,14 @@ def _variants(root: Root) -> list[str]:
     return sorted(p.stem for p in folder.glob("*.ssv")) if folder.is_dir() else []
 
 
-def validate_ssp(path, fmu_dirs=()) -> list[str]:
+def validate_ssp(path, fmu_dirs=(), packaging: bool | None = None) -> list[str]:
     """Every problem found in an SSP: schema errors of each .ssd/.ssv/.ssm, unresolved
-    references (the first per variant), and each contained FMU's problems
-    (:func:`railfmu.fmus.generate.build.validate`). [] if none. Raises only if ``path`` does not exist.
-    ``fmu_dirs``: where to look for FMUs the SSP does not contain (an experiment folder)."""
+    references (the first per variant), and the problems of each FMU it holds or its
+    components name (:func:`railfmu.fmus.generate.build.validate`: FMI conformance, and
+    railfmu's packaging rules for the FMUs railfmu built, or for all with ``packaging``), so
+    a folder and the same files zipped as ``.ssp`` validate alike. [] if none. Raises only if
+    ``path`` does not exist. ``fmu_dirs``: where to look for FMUs the SSP does not contain
+    (an experiment folder: railfmu's build, validated by ``railfmu build``)."""
     from railfmu.fmus.generate.build import validate
 
     given = Path(path)
@@ -174,6 +178,7 @@ def validate_ssp(path, fmu_dirs=()) -> list[str]:
     except UserError as exc:
         return [str(exc)]
     problems: list[str] = []
+    fmus: list[Path] = []
     kinds = {".ssd": "ssd", ".ssv": "ssv", ".ssm": "ssm"}
     for f in sorted(root.dir.rglob("*")):
         if f.suffix in kinds and f.is_file():
@@ -182,17 +187,25 @@ def validate_ssp(path, fmu_dirs=()) -> list[str]:
             except UserError as exc:
                 problems.append(str(exc))
         elif f.suffix == ".fmu" and f.is_file():
-            try:
-                problems += [f"{root.show(f)}: {one_line(p)}" for p in validate(f)]
-            except Exception as exc:  # noqa: BLE001 - a broken FMU is a finding here, not a crash
-                problems.append(f"{root.show(f)}: cannot validate: {one_line(exc)}")
+            fmus.append(f)
     for variant in [None, *_variants(root)]:
         try:
-            _Reader(root, fmu_dirs).read(variant, {}, (None, None, None), need_time=False)
+            reader = _Reader(root, fmu_dirs)
+            try:
+                reader.read(variant, {}, (None, None, None), need_time=False)
+            finally:  # the FMUs the components name, outside the SSP's folder too (../fmi2/X.fmu)
+                fmus += [f for f in reader._mds if not any(f.is_relative_to(Path(d).resolve()) for d in fmu_dirs)]
         except UserError as exc:
             problems.append(str(exc))
         except Exception as exc:  # noqa: BLE001 - validation reports, it does not crash
             problems.append(f"{root.show(root.ssd)}: cannot read the SSP ({type(exc).__name__}: {one_line(exc)})")
+    top = root.dir.resolve()
+    for f in dict.fromkeys(Path(f).resolve() for f in fmus):
+        shown = root.show(root.dir / f.relative_to(top)) if f.is_relative_to(top) else os.path.relpath(f)
+        try:
+            problems += [f"{shown}: {one_line(p)}" for p in validate(f, packaging)]
+        except Exception as exc:  # noqa: BLE001 - a broken FMU is a finding here, not a crash
+            problems.append(f"{shown}: cannot validate: {one_line(exc)}")
     return list(dict.fromkeys(problems))  # a schema error also stops the reader: report it once
 
 
