@@ -246,7 +246,8 @@ def _compiled(fmu: Path, where: str) -> Path:
     the FMU's bytes)."""
     from fmpy.build import build_platform_binary
 
-    key = hashlib.sha256(fmu.read_bytes()).hexdigest()[:20]
+    # the FMU's bytes and how it is compiled (a copy built before the aliases of _unprefixed differs)
+    key = hashlib.sha256(fmu.read_bytes() + b"unprefixed aliases").hexdigest()[:20]
     base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
     out = Path(base) / "railfmu" / "compiled" / key / fmu.name
     if out.is_file():
@@ -262,6 +263,12 @@ def _compiled(fmu: Path, where: str) -> Path:
             with open(work / "build.log", "wb") as log:
                 os.dup2(log.fileno(), 1)
                 build_platform_binary(work / "fmu", build_dir=work / "build")
+                aliases = _unprefixed(work / "fmu")
+                if aliases:  # once more, with the standard names as aliases of the prefixed ones
+                    shutil.rmtree(work / "build")
+                    (work / "build").mkdir()
+                    build_platform_binary(work / "fmu", build_dir=work / "build",
+                                          cmake_options={"CMAKE_SHARED_LINKER_FLAGS": aliases})
         except Exception as exc:  # noqa: BLE001 - cmake, the compiler, a bad build description
             raise UserError(f"{where}: {fmu.name} has no binary for {_platform()} and compiling its "
                             f"sources/ failed: {' '.join(str(exc).split())[:300]}") from None
@@ -278,6 +285,43 @@ def _compiled(fmu: Path, where: str) -> Path:
     finally:
         shutil.rmtree(work, ignore_errors=True)
     return out
+
+
+FMI2_FUNCTIONS = (
+    "GetTypesPlatform GetVersion SetDebugLogging Instantiate FreeInstance SetupExperiment "
+    "EnterInitializationMode ExitInitializationMode Terminate Reset GetReal GetInteger GetBoolean "
+    "GetString SetReal SetInteger SetBoolean SetString GetFMUstate SetFMUstate FreeFMUstate "
+    "SerializedFMUstateSize SerializeFMUstate DeSerializeFMUstate GetDirectionalDerivative "
+    "EnterEventMode NewDiscreteStates EnterContinuousTimeMode CompletedIntegratorStep SetTime "
+    "SetContinuousStates GetDerivatives GetEventIndicators GetContinuousStates "
+    "GetNominalsOfContinuousStates SetRealInputDerivatives GetRealOutputDerivatives DoStep "
+    "CancelStep GetStatus GetRealStatus GetIntegerStatus GetBooleanStatus GetStringStatus").split()
+
+
+def _unprefixed(unzipped: Path) -> str:
+    """FMI 2.0 source code names its functions ``<modelIdentifier>_fmi2DoStep`` (for static
+    linking) unless the FMU's own build says otherwise; a binary built from such sources
+    exports no ``fmi2DoStep``, which every importer looks for. Linker flags that add the
+    standard names as aliases of the prefixed ones (GNU ld ``--defsym``), or "" when the
+    binary needs none (or ``nm`` cannot tell)."""
+    import subprocess
+
+    from fmpy import read_model_description
+
+    md = read_model_description(str(unzipped), validate=False)
+    if md.fmiVersion != "2.0" or md.coSimulation is None:
+        return ""
+    mid = md.coSimulation.modelIdentifier
+    binary = unzipped / "binaries" / _platform() / f"{mid}.so"
+    try:
+        out = subprocess.run(["nm", "-D", "--defined-only", str(binary)], capture_output=True, text=True,
+                             timeout=60).stdout
+    except (OSError, subprocess.SubprocessError):
+        return ""
+    names = {line.split()[-1] for line in out.splitlines() if line.strip()}
+    if "fmi2DoStep" in names or f"{mid}_fmi2DoStep" not in names:
+        return ""
+    return " ".join(f"-Wl,--defsym=fmi2{f}={mid}_fmi2{f}" for f in FMI2_FUNCTIONS if f"{mid}_fmi2{f}" in names)
 
 
 # -- the one set of checks ---------------------------------------------------------------------
