@@ -708,7 +708,7 @@ def run(system: System, master: str = "jacobi", sinks: Sequence[Sink] = (), prog
     if master == "container":
         from railfmu.fmus.cosim.trial import container_refusal
 
-        why = container_refusal(system)
+        why = container_refusal(system, _run_container)
         if why is None:
             return _run_container(system, sinks, progress)
         line = f"container master not used: {why}; running the Jacobi master instead"

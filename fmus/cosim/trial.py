@@ -28,15 +28,16 @@ def built_by_railfmu(md) -> bool:
     return (md.generationTool or "").split(" ")[0] == GENERATOR
 
 
-def container_refusal(system: System) -> str | None:
-    """None if the container master may run ``system``; else one line saying why not."""
+def container_refusal(system: System, run_container) -> str | None:
+    """None if the container master may run ``system``; else one line saying why not.
+    ``run_container(system, sinks, progress)``: the container master, tried in the child."""
     if all(built_by_railfmu(c.md) for c in system.components):
         return None
     n = max(1, min(TRIAL_STEPS, round((system.stop_time - system.start_time) / system.step_size)))
     trial = dataclasses.replace(system, stop_time=system.start_time + n * system.step_size, observers=[])
     ctx = multiprocessing.get_context("fork")  # the parent has loaded no FMU yet
     reader, writer = ctx.Pipe(duplex=False)
-    child = ctx.Process(target=_trial, args=(trial, writer), daemon=True)
+    child = ctx.Process(target=_trial, args=(run_container, trial, writer), daemon=True)
     child.start()
     writer.close()
     child.join(TRIAL_TIMEOUT_S)
@@ -59,10 +60,8 @@ def container_refusal(system: System) -> str | None:
     return f"a {n}-step trial run of the container failed: {message or f'exit code {child.exitcode}'}"
 
 
-def _trial(system: System, writer) -> None:
+def _trial(run_container, system: System, writer) -> None:
     import faulthandler
-
-    from railfmu.fmus.cosim.masters import _run_container
 
     faulthandler.disable()  # a crash is the finding, said by the parent in one line
     devnull = os.open(os.devnull, os.O_WRONLY)
@@ -70,7 +69,7 @@ def _trial(system: System, writer) -> None:
     os.dup2(devnull, 2)
     code = 0
     try:
-        _run_container(system, [], False)
+        run_container(system, [], False)
     except BaseException as exc:  # noqa: BLE001 - everything is a reason not to trust the container
         writer.send(" ".join(str(exc).split()) or type(exc).__name__)
         code = 3
