@@ -7,11 +7,11 @@ system ``sub`` into the top-level system as ``sub.component`` (``sub.inner.compo
 down), its connections with their ends renamed the same way (the nested system's own connector
 ``c`` becomes element ``sub``, connector ``c``), and its parameter bindings with the prefix
 ``sub.`` ahead of the top level's (an outer binding wins, as SSP orders them). What remains are
-ports: :func:`resolve` follows each component input back through ports to the output that
-feeds it, or to a port that nothing feeds: a connector of the top-level system (an input or a
-parameter of the whole system, e.g. OMSimulator's ``Input_cref``) or of a nested one, whose
-value is a parameter of the run, bound by name (``Input_cref``, ``sub.c``) and set on every
-input it reaches.
+ports (:class:`Port`): the reader (``_Reader._connections``) follows each component input back
+through ports to the output that feeds it, or to a port that nothing feeds: a connector of the
+top-level system (an input or a parameter of the whole system, e.g. OMSimulator's
+``Input_cref``) or of a nested one, whose value is a parameter of the run, bound by name
+(``Input_cref``, ``sub.c``) and set on every input it reaches.
 """
 
 from __future__ import annotations

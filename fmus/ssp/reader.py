@@ -1,9 +1,12 @@
-"""SSP 1.0 experiments as a :class:`railfmu.fmus.cosim.system.System`: read, check, validate, write back.
+"""SSP 1.0 and 2.0 experiments as a :class:`railfmu.fmus.cosim.system.System`: read, check, validate, write back.
 
 :func:`read_system` applies what FMPy's own SSP support skips: parameter bindings in the SSD
 (inline and ``.ssv``), ``.ssm`` mappings, ``ssc:LinearTransformation``, unit checks and
 conversions, ``ssd:DefaultExperiment`` and a fixed step size (``--step-size``, else our or the
-OSP annotation, else the smallest DefaultExperiment stepSize of the FMUs). Parameter
+OSP annotation, else OMSimulator's, else the smallest DefaultExperiment stepSize of the
+FMUs). Nested systems are flattened and system connectors become parameters of the run
+(:mod:`railfmu.fmus.ssp.nested`); a single ``.fmu`` is a system of its own
+(:mod:`railfmu.fmus.ssp.single_fmu`). Parameter
 values, lowest priority first:
 
     FMU start values < component-level bindings (document order) < system-level bindings
