@@ -225,3 +225,67 @@ def test_validate_checks_the_fmus_an_ssd_names_outside_its_folder():
     # 20-sim's crane FMUs lack the InitialUnknowns FMPy expects: a conformance finding, per FMU
     problems = validate_ssp(SSPS["libcosim/demo"])
     assert len(problems) == 2 and all("ModelStructure/InitialUnknowns" in p for p in problems), problems
+
+
+NESTED_SSD = """<?xml version="1.0" encoding="UTF-8"?>
+<ssd:SystemStructureDescription version="2.0" name="nested"
+  xmlns:ssd="http://ssp-standard.org/SSP1/SystemStructureDescription"
+  xmlns:ssc="http://ssp-standard.org/SSP1/SystemStructureCommon"
+  xmlns:ssv="http://ssp-standard.org/SSP1/SystemStructureParameterValues">
+  <ssd:System name="top">
+    <ssd:Connectors><ssd:Connector name="x" kind="input"><ssc:Float64/></ssd:Connector></ssd:Connectors>
+    <ssd:ParameterBindings><ssd:ParameterBinding><ssd:ParameterValues>
+      <ssv:ParameterSet version="2.0" name="p"><ssv:Parameters>
+        <ssv:Parameter name="x"><ssv:Float64 value="2"/></ssv:Parameter>
+      </ssv:Parameters></ssv:ParameterSet>
+    </ssd:ParameterValues></ssd:ParameterBinding></ssd:ParameterBindings>
+    <ssd:Elements>
+      <ssd:System name="sub">
+        <ssd:Connectors>
+          <ssd:Connector name="in" kind="input"><ssc:Float64/></ssd:Connector>
+          <ssd:Connector name="out" kind="output"><ssc:Float64/></ssd:Connector>
+        </ssd:Connectors>
+        <ssd:ParameterBindings><ssd:ParameterBinding><ssd:ParameterValues>
+          <ssv:ParameterSet version="2.0" name="q"><ssv:Parameters>
+            <ssv:Parameter name="Gain1.k"><ssv:Float64 value="3"/></ssv:Parameter>
+          </ssv:Parameters></ssv:ParameterSet>
+        </ssd:ParameterValues></ssd:ParameterBinding></ssd:ParameterBindings>
+        <ssd:Elements>
+          <ssd:Component name="Gain1" source="resources/Gain.fmu"/>
+        </ssd:Elements>
+        <ssd:Connections>
+          <ssd:Connection startConnector="in" endElement="Gain1" endConnector="u"/>
+          <ssd:Connection startElement="Gain1" startConnector="y" endConnector="out"/>
+        </ssd:Connections>
+      </ssd:System>
+      <ssd:Component name="Add1" source="resources/Add.fmu"/>
+    </ssd:Elements>
+    <ssd:Connections>
+      <ssd:Connection startElement="" startConnector="x" endElement="sub" endConnector="in"/>
+      <ssd:Connection startElement="sub" startConnector="out" endElement="Add1" endConnector="u1"/>
+    </ssd:Connections>
+  </ssd:System>
+  <ssd:DefaultExperiment startTime="0" stopTime="0.1"/>
+</ssd:SystemStructureDescription>
+"""
+
+
+def test_a_nested_system_is_flattened_through_its_connectors(tmp_path):
+    """x (a top-level input, bound to 2) -> sub.in -> sub.Gain1 (k = 3, bound inside sub) ->
+    sub.out -> Add1.u1: Add1.y = k1 * 6 + k2 * 0 = 6 (k1 = 1); --set changes x."""
+    import shutil
+
+    (tmp_path / "resources").mkdir()
+    for f in ("Add.fmu", "Gain.fmu"):
+        shutil.copy(SSPS["omsimulator/LinearTransformation"] / "resources" / f, tmp_path / "resources" / f)
+    (tmp_path / "SystemStructure.ssd").write_text(NESTED_SSD)
+    system = read_system(tmp_path, step_size=0.01)
+    assert [c.name for c in system.components] == ["sub.Gain1", "Add1"]
+    assert [str(c) for c in system.connections] == ["sub.Gain1.y -> Add1.u1"]
+    assert system.component("sub.Gain1").parameters == {"k": 3.0, "u": 2.0}
+    system.record = ["sub.Gain1.y", "Add1.u1", "Add1.y"]
+    res = run(system, "jacobi", progress=False)
+    assert dict(zip(res.columns, res.data[-1])) == {"time": pytest.approx(0.1), "sub.Gain1.y": 6.0,
+                                                     "Add1.u1": 6.0, "Add1.y": 6.0}
+    again = read_system(tmp_path, step_size=0.01, overrides={"top": {"x": "5"}, "sub": {"Gain1.k": "2"}})
+    assert again.component("sub.Gain1").parameters == {"k": 2.0, "u": 5.0}
