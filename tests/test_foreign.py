@@ -289,3 +289,17 @@ def test_a_nested_system_is_flattened_through_its_connectors(tmp_path):
                                                      "Add1.u1": 6.0, "Add1.y": 6.0}
     again = read_system(tmp_path, step_size=0.01, overrides={"top": {"x": "5"}, "sub": {"Gain1.k": "2"}})
     assert again.component("sub.Gain1").parameters == {"k": 2.0, "u": 5.0}
+
+
+def test_the_container_master_falls_back_in_one_line_on_a_crashing_system(tmp_path):
+    """FMPy's container FMU segfaults on libcosim's crane demo: the trial run in a child says
+    so in one warning line, the Jacobi master runs, and the process ends normally."""
+    out = tmp_path / "out"
+    res = subprocess.run([sys.executable, "-m", "railfmu.experiments.engine.cli", "run", "-q",
+                          str(SSPS["libcosim/demo"]), "--master", "container", "--stop-time", "0.01",
+                          "--out", str(out)], capture_output=True, text=True)
+    assert res.returncode == 0, res.stderr
+    assert "Traceback" not in res.stderr and "Fatal Python error" not in res.stderr
+    warning = [line for line in res.stderr.splitlines() if "container master not used" in line]
+    assert len(warning) == 1 and "crashed (SIGSEGV)" in warning[0] and "Jacobi" in warning[0], res.stderr
+    assert len((out / "signals.csv").read_text().splitlines()) == 1 + 101  # 0.01 s at 0.1 ms
