@@ -55,6 +55,8 @@ def system_of_fmu(path, overrides: dict | None = None, start_time: float | None 
             step, step_from = float(given), "the FMU's DefaultExperiment stepSize"
             while (stop - start) / step > 1000:  # as fmpy simulate
                 step *= 2
+            if step != float(given):
+                step_from += f" {float(given):g} s, doubled to at most 1000 steps as fmpy simulate does"
         else:
             step, step_from = float(auto_interval(stop - start)), "FMPy's output interval for the run's length"
     system = System(name=name, components=[comp], connections=[], start_time=start, stop_time=stop,
