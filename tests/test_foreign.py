@@ -303,3 +303,33 @@ def test_the_container_master_falls_back_in_one_line_on_a_crashing_system(tmp_pa
     warning = [line for line in res.stderr.splitlines() if "container master not used" in line]
     assert len(warning) == 1 and "crashed (SIGSEGV)" in warning[0] and "Jacobi" in warning[0], res.stderr
     assert len((out / "signals.csv").read_text().splitlines()) == 1 + 101  # 0.01 s at 0.1 ms
+
+
+def test_an_enumeration_signal_is_connected_and_recorded(reference_dir, tmp_path):
+    """Feedthrough (Reference-FMUs) passes its Enumeration input to its output; two in a row,
+    the first's input set to "Option 2" by name: the second outputs 2 (FMI 2.0 carries an
+    Enumeration as an Integer), under the Python masters; the container cannot declare the
+    type (FMPy's container FMU has no declaredType) and falls back to Jacobi."""
+    import shutil
+
+    (tmp_path / "resources").mkdir()
+    shutil.copy(reference_fmu("Feedthrough", reference_dir), tmp_path / "resources" / "Feedthrough.fmu")
+    comps = "".join(f'<ssd:Component name="{n}" source="resources/Feedthrough.fmu"><ssd:Connectors>'
+                    '<ssd:Connector name="Enumeration_input" kind="input"><ssc:Enumeration name="Option"/></ssd:Connector>'
+                    '<ssd:Connector name="Enumeration_output" kind="output"><ssc:Enumeration name="Option"/></ssd:Connector>'
+                    '</ssd:Connectors></ssd:Component>' for n in ("a", "b"))
+    (tmp_path / "SystemStructure.ssd").write_text(
+        '<?xml version="1.0" encoding="UTF-8"?><ssd:SystemStructureDescription version="1.0" name="enum" '
+        'xmlns:ssd="http://ssp-standard.org/SSP1/SystemStructureDescription" '
+        'xmlns:ssc="http://ssp-standard.org/SSP1/SystemStructureCommon"><ssd:System name="s">'
+        f'<ssd:Elements>{comps}</ssd:Elements><ssd:Connections><ssd:Connection startElement="a" '
+        'startConnector="Enumeration_output" endElement="b" endConnector="Enumeration_input"/>'
+        '</ssd:Connections></ssd:System><ssd:DefaultExperiment startTime="0" stopTime="0.1"/>'
+        '</ssd:SystemStructureDescription>')
+    for master in MASTERS:
+        system = read_system(tmp_path, step_size=0.01, overrides={"a": {"Enumeration_input": "Option 2"}})
+        system.record = ["a.Enumeration_output", "b.Enumeration_output"]
+        res = run(system, master, progress=False)
+        assert res.master == ("jacobi" if master == "container" else master)
+        # Jacobi: b sees a's output one step later; Gauss-Seidel at once
+        assert res.data[-1, 1:].tolist() == [2, 2] and res.data[0, 1] == 2, master

@@ -68,7 +68,7 @@ import numpy as np
 
 from railfmu.models.errors import UserError
 from railfmu.fmus.cosim.slave import Slave, Status
-from railfmu.fmus.cosim.system import Connection, Sink, System, check_system, recorded_signals
+from railfmu.fmus.cosim.system import Connection, Sink, System, carried_type, check_system, recorded_signals
 
 MASTERS = ("jacobi", "gauss-seidel", "container")
 BLOCK_ROWS = 1000  # container path: rows per C call / per write_block
@@ -319,7 +319,7 @@ class _Link:
 def _links(conns: list[Connection], fmus: dict[str, _Fmu]) -> list[_Link]:
     """Connections grouped into links (types checked by :func:`check_system`)."""
     def kind(c: Connection) -> str:
-        return fmus[c.src].slave.var(c.src_var).type
+        return carried_type(fmus[c.src].slave.var(c.src_var).type)
 
     groups: list[list[Connection]] = []
     for c in conns:
@@ -348,11 +348,12 @@ class _Sampler:
         for col, signal in enumerate(record, start=1):
             comp, v = system.signal(signal, "recorded signal")
             fmu = fmus[comp.name]
-            if runs and runs[-1][0] is fmu and runs[-1][1] == v.type and runs[-1][3][-1] == col - 1:
+            t = carried_type(v.type)
+            if runs and runs[-1][0] is fmu and runs[-1][1] == t and runs[-1][3][-1] == col - 1:
                 runs[-1][2].append(v.valueReference)
                 runs[-1][3].append(col)
             else:
-                runs.append((fmu, v.type, [v.valueReference], [col]))
+                runs.append((fmu, t, [v.valueReference], [col]))
         self.runs = [(f, f.get[t], (ctypes.c_uint * len(vrs))(*vrs), len(vrs), cols[0] * 8,
                       None if t == "Real" else ((ctypes.c_int * len(vrs))(), slice(cols[0], cols[-1] + 1),
                                                 t == "Boolean"))
@@ -553,8 +554,8 @@ def _run_container(system: System, sinks: Sequence[Sink], progress: bool) -> Run
         typed: dict[str, tuple[list[int], list[int]]] = {t: ([], []) for t in _C_TYPES}
         for col, signal in enumerate(record, start=1):
             v = names[signal]
-            typed[v.type][0].append(v.valueReference)
-            typed[v.type][1].append(col)
+            typed[carried_type(v.type)][0].append(v.valueReference)
+            typed[carried_type(v.type)][1].append(col)
         slave.enter_initialization(start, fmu_stop_time(stop, h))
         apply_parameters(slave, values)
         slave.exit_initialization()

@@ -163,14 +163,15 @@ class Slave:
         v = self.var(name)
         f = self.fmu
         setter, conv = {"Real": (f.setReal, float), "Integer": (f.setInteger, int),
+                        "Enumeration": (f.setInteger, int),  # FMI 2.0 sets an Enumeration as an Integer
                         "Boolean": (f.setBoolean, bool), "String": (f.setString, str)}[v.type]
         self.call(f"setting {name}", setter, [v.valueReference], [conv(value)])
 
     def get(self, name: str):
         v = self.var(name)
         f = self.fmu
-        getter = {"Real": f.getReal, "Integer": f.getInteger, "Boolean": f.getBoolean,
-                  "String": f.getString}[v.type]
+        getter = {"Real": f.getReal, "Integer": f.getInteger, "Enumeration": f.getInteger,
+                  "Boolean": f.getBoolean, "String": f.getString}[v.type]
         return self.call(f"reading {name}", getter, [v.valueReference])[0]
 
     def enter_initialization(self, start_time: float = 0.0, stop_time: float | None = None) -> None:

@@ -26,7 +26,13 @@ import numpy as np
 from railfmu.models.errors import UserError
 
 Value = float | int | bool | str
-SIGNAL_TYPES = ("Real", "Integer", "Boolean")  # what a connection carries and signals.csv records
+SIGNAL_TYPES = ("Real", "Integer", "Boolean", "Enumeration")  # what a connection carries and signals.csv records
+
+
+def carried_type(fmi_type: str) -> str:
+    """The FMI 2.0 accessor type of a variable: an Enumeration is read and set as an Integer
+    (fmi2GetInteger, fmi2SetInteger)."""
+    return "Integer" if fmi_type == "Enumeration" else fmi_type
 RESERVED_SETTINGS = ("enabled",)  # observer settings the platform reads, not the estimator class
 
 
@@ -184,8 +190,8 @@ class System:
 
 
 def recorded_signals(system: System) -> list[str]:
-    """``system.record``, or every output of type Real, Integer or Boolean of every component,
-    in component order."""
+    """``system.record``, or every output of type Real, Integer, Boolean or Enumeration of
+    every component, in component order."""
     if system.record:
         for signal in system.record:
             if "." not in signal:
