@@ -254,8 +254,9 @@ def _compiled(fmu: Path, where: str) -> Path:
 
     # the FMU's bytes and how it is compiled (a copy built before the aliases of _unprefixed differs)
     key = hashlib.sha256(fmu.read_bytes() + b"unprefixed aliases").hexdigest()[:20]
-    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
-    out = Path(base) / "railfmu" / "compiled" / key / fmu.name
+    from railfmu.fmus.cache import cache_root
+
+    out = cache_root() / "compiled" / key / fmu.name  # with the built FMUs ($RAILFMU_CACHE)
     if out.is_file():
         return out
     work = Path(tempfile.mkdtemp(prefix="railfmu-compile-"))
