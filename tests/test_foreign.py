@@ -333,3 +333,10 @@ def test_an_enumeration_signal_is_connected_and_recorded(reference_dir, tmp_path
         assert res.master == ("jacobi" if master == "container" else master)
         # Jacobi: b sees a's output one step later; Gauss-Seidel at once
         assert res.data[-1, 1:].tolist() == [2, 2] and res.data[0, 1] == 2, master
+    # an Integer output may feed an Enumeration input (both fmi2Integer; Dymola's and Simulink's
+    # FMUs in OMSimulator's examples are joined so)
+    ssd = tmp_path / "SystemStructure.ssd"
+    ssd.write_text(ssd.read_text().replace('startConnector="Enumeration_output"', 'startConnector="Int32_output"'))
+    system = read_system(tmp_path, step_size=0.01, overrides={"a": {"Int32_input": "2"}})
+    system.record = ["b.Enumeration_output"]
+    assert run(system, "jacobi", progress=False).data[-1, 1] == 2

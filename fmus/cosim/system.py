@@ -378,7 +378,7 @@ def check_system(system: System) -> int:
         dv = system.component(k.dst).variable(k.dst_var, f"connection {k}")
         if dv.causality != "input":
             raise UserError(f"connection {k}: {k.dst}.{k.dst_var} is a(n) {dv.causality}; a connection ends at an input")
-        if sv.type != dv.type:
+        if carried_type(sv.type) != carried_type(dv.type):  # an Enumeration travels as an Integer
             raise UserError(f"connection {k}: type mismatch: {sv.type} -> {dv.type}")
         if sv.type not in SIGNAL_TYPES:
             raise UserError(f"connection {k}: {sv.type} connections are not supported "

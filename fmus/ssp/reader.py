@@ -88,6 +88,7 @@ from railfmu.fmus.cosim.system import (
     ObserverSpec,
     System,
     Value,
+    carried_type,
     check_system,
     n_steps,
     read_model,
@@ -444,7 +445,7 @@ class _Reader:
                             "an output (or a parameter)")
         if dvar.causality != "input":
             raise UserError(f"{where}: end {d}.{dc} is a(n) {dvar.causality}; a connection ends at an input")
-        if svar.type != dvar.type:
+        if carried_type(svar.type) != carried_type(dvar.type):  # Integer <-> Enumeration: both fmi2Integer
             raise UserError(f"{where}: type mismatch: {svar.type} -> {dvar.type} (a connection joins "
                             "two variables of one type)")
         factor, offset = self._connection_map(el, where, src, svar, dst, dvar)
