@@ -289,6 +289,12 @@ def test_a_nested_system_is_flattened_through_its_connectors(tmp_path):
                                                      "Add1.u1": 6.0, "Add1.y": 6.0}
     again = read_system(tmp_path, step_size=0.01, overrides={"top": {"x": "5"}, "sub": {"Gain1.k": "2"}})
     assert again.component("sub.Gain1").parameters == {"k": 2.0, "u": 5.0}
+    # a transformation on the way from a system connector's value would be lost: refused
+    (tmp_path / "SystemStructure.ssd").write_text(NESTED_SSD.replace(
+        'endElement="sub" endConnector="in"/>',
+        'endElement="sub" endConnector="in"><ssc:LinearTransformation factor="2"/></ssd:Connection>'))
+    with pytest.raises(UserError, match="a transformation on a connection to a system connector is not supported"):
+        read_system(tmp_path, step_size=0.01)
 
 
 def test_the_container_master_falls_back_in_one_line_on_a_crashing_system(tmp_path):

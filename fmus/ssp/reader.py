@@ -399,11 +399,12 @@ class _Reader:
                 src = (feeders[0].get("startElement", ""), feeders[0].get("startConnector"))
                 if len(chain) > len(self.flat.ports) + 1:
                     raise UserError(f"{self.at(el)}: Connection: a loop of system connectors")
-            for k in chain[1:]:
+            unfed = src in self.flat.ports and src[0] not in self.comps
+            for k in chain[1:] if not unfed else chain:  # a system connector's value is set as it is
                 if children(k, SSC_NS):
                     raise UserError(f"{self.at(k)}: a transformation on a connection to a system connector "
                                     "is not supported")
-            if src in self.flat.ports and src[0] not in self.comps:  # fed by nothing: a parameter of the run
+            if unfed:  # fed by nothing: a parameter of the run
                 self.port_targets.setdefault(src, []).append(el)
                 continue
             c = self._connection(el, src)
