@@ -48,7 +48,7 @@ def cmd_build(args) -> int:
 
 
 def cmd_validate(args) -> int:
-    from railfmu.fmus.generate.build import build_all, default_out, validate
+    from railfmu.fmus.generate.build import build_all, default_out, describe, validate
     from railfmu.fmus.ssp import validate_ssp
 
     path = Path(args.path)
@@ -62,16 +62,18 @@ def cmd_validate(args) -> int:
         targets = [path]
     bad = 0
     for t in targets:
+        what = ""
         if t.suffix == ".fmu":
-            problems = validate(t)
+            problems = validate(t, packaging=args.packaging or None)
+            what = f" ({describe(t)})"
         elif t.suffix in (".ssp", ".ssd") or t.is_dir():
             if t.suffix != ".ssp":  # an experiment folder: its FMUs come from the build
                 build_all(default_out())
-            problems = validate_ssp(t, fmu_dirs=[default_out()])
+            problems = validate_ssp(t, fmu_dirs=[default_out()], packaging=args.packaging or None)
         else:
             raise UserError(f"{t}: not an FMU or SSP (.fmu, .ssp, .ssd or a folder)")
         bad += bool(problems)
-        print(f"{t}: {'OK' if not problems else f'{len(problems)} problems'}")
+        print(f"{t}: {'OK' if not problems else f'{len(problems)} problems'}{what}")
         for pr in problems:
             print(f"  - {pr}")
     return 1 if bad else 0
@@ -251,6 +253,9 @@ def main(argv: list[str] | None = None) -> int:
     p.set_defaults(fn=cmd_build)
     p = sub.add_parser("validate", help="validate an FMU, an SSP (.ssp, .ssd, folder) or every FMU/SSP in a folder")
     p.add_argument("path")
+    p.add_argument("--packaging", action="store_true",
+                   help="apply railfmu's packaging rules (linux64 binary, C sources) to every FMU, not only "
+                        "to those railfmu built")
     p.set_defaults(fn=cmd_validate)
     p = sub.add_parser("list", help="experiments and their variants")
     p.set_defaults(fn=cmd_list)

@@ -60,6 +60,8 @@ def _study_of(path: Path) -> tuple[Study, str | None, list[str]]:
     from railfmu.fmus.ssp import study_name
 
     name = study_name(path)
+    if name is None and Path(path).suffix.lower() == ".fmu":
+        return Study(), None, []  # a single FMU names no study: plain metrics, nothing to warn about
     if name is None:
         return Study(), None, [f"{path}: the SSD names no study (no org.railfmu.study annotation): "
                                "plain SSP metrics only"]

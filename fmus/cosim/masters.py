@@ -73,7 +73,7 @@ import numpy as np
 
 from railfmu.models.errors import UserError
 from railfmu.fmus.cosim.slave import Slave, Status
-from railfmu.fmus.cosim.system import Connection, Sink, System, check_system, recorded_signals
+from railfmu.fmus.cosim.system import Connection, Sink, System, carried_type, check_system, recorded_signals
 
 MASTERS = ("jacobi", "gauss-seidel", "container")
 BLOCK_ROWS = 1000  # container path: rows per C call / per write_block
@@ -95,6 +95,14 @@ class RunResult:
     early_end: str | None = None  # "X.fmu (name) ended the simulation at t = ... s (...)"
     step_size: float | None = None
     step_size_from: str | None = None  # where the step size came from (System.step_size_from)
+
+
+def fmu_stop_time(stop: float, h: float) -> float:
+    """The stop time the FMUs are told (fmi2SetupExperiment): the run's, plus a millionth of a
+    step. The last step starts at start + (n-1) h, and start + (n-1) h + h can exceed the stop
+    time by an ulp; an FMU that checks its steps against its stop time (OpenModelica's) then
+    refuses the last step with fmi2Error, where OMSimulator's run reaches the end."""
+    return stop + 1e-6 * h
 
 
 class _Terminated(Exception):
@@ -346,7 +354,7 @@ class _Link:
 def _links(conns: list[Connection], fmus: dict[str, _Fmu]) -> list[_Link]:
     """Connections grouped into links (types checked by :func:`check_system`)."""
     def kind(c: Connection) -> str:
-        return fmus[c.src].slave.var(c.src_var).type
+        return carried_type(fmus[c.src].slave.var(c.src_var).type)
 
     groups: list[list[Connection]] = []
     for c in conns:
@@ -375,11 +383,12 @@ class _Sampler:
         for col, signal in enumerate(record, start=1):
             comp, v = system.signal(signal, "recorded signal")
             fmu = fmus[comp.name]
-            if runs and runs[-1][0] is fmu and runs[-1][1] == v.type and runs[-1][3][-1] == col - 1:
+            t = carried_type(v.type)
+            if runs and runs[-1][0] is fmu and runs[-1][1] == t and runs[-1][3][-1] == col - 1:
                 runs[-1][2].append(v.valueReference)
                 runs[-1][3].append(col)
             else:
-                runs.append((fmu, v.type, [v.valueReference], [col]))
+                runs.append((fmu, t, [v.valueReference], [col]))
         self.runs = [(f, f.get[t], (ctypes.c_uint * len(vrs))(*vrs), len(vrs), cols[0] * 8,
                       None if t == "Real" else ((f.ctype[t] * len(vrs))(), slice(cols[0], cols[-1] + 1),
                                                 t == "Boolean"))
@@ -441,7 +450,7 @@ def _run_python(system: System, master: str, sinks: Sequence[Sink], progress: bo
     try:
         for comp in system.components:
             s = slaves[comp.name] = Slave(comp.fmu, comp.name, md=comp.md)
-            s.enter_initialization(start, stop)
+            s.enter_initialization(start, fmu_stop_time(stop, h))
             for name, value in comp.parameters.items():
                 s.set(name, value)
         fmus = {name: _Fmu(s) for name, s in slaves.items()}
@@ -583,9 +592,9 @@ def _run_container(system: System, sinks: Sequence[Sink], progress: bool) -> Run
         typed: dict[str, tuple[list[int], list[int]]] = {t: ([], []) for t in _C_TYPES}
         for col, signal in enumerate(record, start=1):
             v = names[signal]
-            typed[v.type][0].append(v.valueReference)
-            typed[v.type][1].append(col)
-        slave.enter_initialization(start, stop)
+            typed[carried_type(v.type)][0].append(v.valueReference)
+            typed[carried_type(v.type)][1].append(col)
+        slave.enter_initialization(start, fmu_stop_time(stop, h))
         apply_parameters(slave, values)
         slave.exit_initialization()
         f = _Fmu(slave)
@@ -737,13 +746,18 @@ def run(system: System, master: str = "jacobi", sinks: Sequence[Sink] = (), prog
     if master not in MASTERS:
         raise UserError(f"unknown master {master!r}; choose one of {', '.join(MASTERS)}")
     if master == "container":
+        from railfmu.fmus.cosim.trial import container_refusal
+
         others = [f"{c.name} (FMI {c.md.fmiVersion})" for c in system.components
                   if str(c.md.fmiVersion) not in ("2.0", "3.0")]
-        if not others:
+        why = (f"FMPy's container FMU takes FMI 2.0 and 3.0 components, not {', '.join(others)}"
+               if others else container_refusal(system, _run_container))
+        if why is None:
             return _run_container(system, sinks, progress)
+        line = f"container master not used: {why}; running the Jacobi master instead"
+        system.warnings.append(line)
+        print(f"railfmu: warning: {line}", file=sys.stderr)
         result = _run_python(system, "jacobi", sinks, progress)
-        result.notes.insert(0, "container: FMPy's container FMU takes FMI 2.0 and 3.0 components, not "
-                               f"{', '.join(others)}: ran with the jacobi master, which couples like the "
-                               "container (same samples)")
+        result.notes.insert(0, line)
         return result
     return _run_python(system, master, sinks, progress)

@@ -100,6 +100,18 @@ def _unzipped(fmu: Path) -> str:
     return folder
 
 
+def _load_failure(exc: Exception) -> str:
+    """What FMPy's loader raised, as one line naming the FMI function when one is missing."""
+    import re
+
+    text = " ".join(str(exc).split())
+    m = re.search(r"undefined symbol: (\w+)", text)
+    if m:
+        return (f"its binary does not export the FMI function {m.group(1)} (a source FMU compiled with "
+                "prefixed function names, or an incomplete FMI implementation)")
+    return f"cannot load its binary: {text}"
+
+
 class Slave:
     """An instantiated FMI 1.0, 2.0 or 3.0 co-simulation FMU (``version``); ``messages``
     holds (status, category, text)."""
@@ -132,9 +144,8 @@ class Slave:
             self.fmu = kind(guid=self.md.guid, unzipDirectory=self.dir,
                             modelIdentifier=self.md.coSimulation.modelIdentifier,
                             instanceName=instance_name)
-        except Exception as exc:  # noqa: BLE001 - FMPy: a missing library or function
-            raise UserError(f"{fmu.name} ({instance_name}): cannot load its binary: "
-                            f"{' '.join(str(exc).split())}") from None
+        except (AttributeError, OSError) as exc:  # a binary that lacks an FMI function, or will not load
+            raise FMUError(f"{fmu.name} ({instance_name}): {_load_failure(exc)}") from None
         self._callbacks = self._make_callbacks()
         try:
             if self.version == 1:
@@ -235,6 +246,7 @@ class Slave:
                             "Boolean": (f.setBoolean, bool), "String": (f.setString, str)}[v.type]
         else:
             setter, conv = {"Real": (f.setReal, float), "Integer": (f.setInteger, int),
+                            "Enumeration": (f.setInteger, int),  # FMI 1.0/2.0 set an Enumeration as an Integer
                             "Boolean": (f.setBoolean, bool), "String": (f.setString, str)}[v.type]
         self.call(f"setting {name}", setter, [v.valueReference], [conv(value)])
 
@@ -245,8 +257,8 @@ class Slave:
             getter = {"Real": f.getFloat64, "Integer": f.getInt32, "Boolean": f.getBoolean,
                       "String": f.getString}[v.type]
         else:
-            getter = {"Real": f.getReal, "Integer": f.getInteger, "Boolean": f.getBoolean,
-                      "String": f.getString}[v.type]
+            getter = {"Real": f.getReal, "Integer": f.getInteger, "Enumeration": f.getInteger,
+                      "Boolean": f.getBoolean, "String": f.getString}[v.type]
         return self.call(f"reading {name}", getter, [v.valueReference])[0]
 
     def enter_initialization(self, start_time: float = 0.0, stop_time: float | None = None) -> None:

@@ -26,7 +26,13 @@ import numpy as np
 from railfmu.models.errors import UserError
 
 Value = float | int | bool | str
-SIGNAL_TYPES = ("Real", "Integer", "Boolean")  # what a connection carries and signals.csv records
+SIGNAL_TYPES = ("Real", "Integer", "Boolean", "Enumeration")  # what a connection carries and signals.csv records
+
+
+def carried_type(fmi_type: str) -> str:
+    """The FMI 2.0 accessor type of a variable: an Enumeration is read and set as an Integer
+    (fmi2GetInteger, fmi2SetInteger)."""
+    return "Integer" if fmi_type == "Enumeration" else fmi_type
 RESERVED_SETTINGS = ("enabled",)  # observer settings the platform reads, not the estimator class
 
 
@@ -184,8 +190,8 @@ class System:
 
 
 def recorded_signals(system: System) -> list[str]:
-    """``system.record``, or every output of type Real, Integer or Boolean of every component,
-    in component order."""
+    """``system.record``, or every output of type Real, Integer, Boolean or Enumeration of
+    every component, in component order."""
     if system.record:
         for signal in system.record:
             if "." not in signal:
@@ -251,9 +257,11 @@ def _compiled(fmu: Path, where: str) -> Path:
     the FMU's bytes)."""
     from fmpy.build import build_platform_binary
 
-    key = hashlib.sha256(fmu.read_bytes()).hexdigest()[:20]
-    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
-    out = Path(base) / "railfmu" / "compiled" / key / fmu.name
+    # the FMU's bytes and how it is compiled (a copy built before the aliases of _unprefixed differs)
+    key = hashlib.sha256(fmu.read_bytes() + b"unprefixed aliases").hexdigest()[:20]
+    from railfmu.fmus.cache import cache_root
+
+    out = cache_root() / "compiled" / key / fmu.name  # with the built FMUs ($RAILFMU_CACHE)
     if out.is_file():
         return out
     work = Path(tempfile.mkdtemp(prefix="railfmu-compile-"))
@@ -267,6 +275,12 @@ def _compiled(fmu: Path, where: str) -> Path:
             with open(work / "build.log", "wb") as log:
                 os.dup2(log.fileno(), 1)
                 build_platform_binary(work / "fmu", build_dir=work / "build")
+                aliases = _unprefixed(work / "fmu")
+                if aliases:  # once more, with the standard names as aliases of the prefixed ones
+                    shutil.rmtree(work / "build")
+                    (work / "build").mkdir()
+                    build_platform_binary(work / "fmu", build_dir=work / "build",
+                                          cmake_options={"CMAKE_SHARED_LINKER_FLAGS": aliases})
         except Exception as exc:  # noqa: BLE001 - cmake, the compiler, a bad build description
             raise UserError(f"{where}: {fmu.name} has no binary for {_platform()} and compiling its "
                             f"sources/ failed: {' '.join(str(exc).split())[:300]}") from None
@@ -283,6 +297,43 @@ def _compiled(fmu: Path, where: str) -> Path:
     finally:
         shutil.rmtree(work, ignore_errors=True)
     return out
+
+
+FMI2_FUNCTIONS = (
+    "GetTypesPlatform GetVersion SetDebugLogging Instantiate FreeInstance SetupExperiment "
+    "EnterInitializationMode ExitInitializationMode Terminate Reset GetReal GetInteger GetBoolean "
+    "GetString SetReal SetInteger SetBoolean SetString GetFMUstate SetFMUstate FreeFMUstate "
+    "SerializedFMUstateSize SerializeFMUstate DeSerializeFMUstate GetDirectionalDerivative "
+    "EnterEventMode NewDiscreteStates EnterContinuousTimeMode CompletedIntegratorStep SetTime "
+    "SetContinuousStates GetDerivatives GetEventIndicators GetContinuousStates "
+    "GetNominalsOfContinuousStates SetRealInputDerivatives GetRealOutputDerivatives DoStep "
+    "CancelStep GetStatus GetRealStatus GetIntegerStatus GetBooleanStatus GetStringStatus").split()
+
+
+def _unprefixed(unzipped: Path) -> str:
+    """FMI 2.0 source code names its functions ``<modelIdentifier>_fmi2DoStep`` (for static
+    linking) unless the FMU's own build says otherwise; a binary built from such sources
+    exports no ``fmi2DoStep``, which every importer looks for. Linker flags that add the
+    standard names as aliases of the prefixed ones (GNU ld ``--defsym``), or "" when the
+    binary needs none (or ``nm`` cannot tell)."""
+    import subprocess
+
+    from fmpy import read_model_description
+
+    md = read_model_description(str(unzipped), validate=False)
+    if md.fmiVersion != "2.0" or md.coSimulation is None:
+        return ""
+    mid = md.coSimulation.modelIdentifier
+    binary = unzipped / "binaries" / _platform() / f"{mid}.so"
+    try:
+        out = subprocess.run(["nm", "-D", "--defined-only", str(binary)], capture_output=True, text=True,
+                             timeout=60).stdout
+    except (OSError, subprocess.SubprocessError):
+        return ""
+    names = {line.split()[-1] for line in out.splitlines() if line.strip()}
+    if "fmi2DoStep" in names or f"{mid}_fmi2DoStep" not in names:
+        return ""
+    return " ".join(f"-Wl,--defsym=fmi2{f}={mid}_fmi2{f}" for f in FMI2_FUNCTIONS if f"{mid}_fmi2{f}" in names)
 
 
 # -- the one set of checks ---------------------------------------------------------------------
@@ -332,7 +383,7 @@ def check_system(system: System) -> int:
         dv = system.component(k.dst).variable(k.dst_var, f"connection {k}")
         if dv.causality != "input":
             raise UserError(f"connection {k}: {k.dst}.{k.dst_var} is a(n) {dv.causality}; a connection ends at an input")
-        if sv.type != dv.type:
+        if carried_type(sv.type) != carried_type(dv.type):  # an Enumeration travels as an Integer
             raise UserError(f"connection {k}: type mismatch: {sv.type} -> {dv.type}")
         if sv.type not in SIGNAL_TYPES:
             raise UserError(f"connection {k}: {sv.type} connections are not supported "

@@ -396,24 +396,60 @@ def build_all(out_dir: Path | str | None = None, models: list[Model] | None = No
     return paths
 
 
-def validate(path: Path | str) -> list[str]:
-    """FMPy's validation of modelDescription.xml plus the archive layout we promise."""
+def validate(path: Path | str, packaging: bool | None = None) -> list[str]:
+    """Every problem of an FMU: FMI conformance for any FMU (FMPy's validation of
+    modelDescription.xml: schema, units, variable and dependency rules; a ZIP archive with a
+    binary or sources), then railfmu's own packaging rules (a linux64 binary and the C
+    sources) when ``packaging`` is true, or, when it is None, for an FMU railfmu built (its
+    generationTool): another tool's FMU that conforms is not broken for lacking them."""
     from fmpy.validation import validate_fmu
 
     path = Path(path)
     if path.is_file() and not zipfile.is_zipfile(path):
         return [f"{path.name} is not a ZIP archive"]
     problems = list(validate_fmu(str(path)))
-    if path.is_file():
-        with zipfile.ZipFile(path) as zf:
-            names = zf.namelist()
-        folders = {(binary_folder(p, v), suffix) for p, (_, _, suffix, _) in PLATFORMS.items() for v in FMI_VERSIONS}
-        if not any(n.startswith(f"binaries/{f}/") and n.endswith(suffix) for f, suffix in folders for n in names):
-            problems.append(f"no binary in {' or '.join(sorted(f'binaries/{f}/' for f, _ in folders))}")
-        for folder, suffix in sorted(folders):  # a platform's folder holds its library
-            members = [n for n in names if n.startswith(f"binaries/{folder}/") and not n.endswith("/")]
-            if members and not any(n.endswith(suffix) for n in members):
-                problems.append(f"binaries/{folder}/ has no {suffix} library")
+    if not path.is_file():
+        return problems
+    with zipfile.ZipFile(path) as zf:
+        names = zf.namelist()
+    if not any(n.startswith("binaries/") and not n.endswith("/") for n in names) \
+            and not any(n.startswith("sources/") for n in names):
+        problems.append("neither binaries/ nor sources/: nothing can run it")
+    for folder, suffix in sorted({(binary_folder(p, v), s) for p, (_, _, s, _) in PLATFORMS.items()
+                                  for v in FMI_VERSIONS}):  # a platform's folder holds its library
+        members = [n for n in names if n.startswith(f"binaries/{folder}/") and not n.endswith("/")]
+        if members and not any(n.endswith(suffix) for n in members):
+            problems.append(f"binaries/{folder}/ has no {suffix} library")
+    if packaging is None:
+        packaging = built_by_railfmu(path)
+    if packaging:
+        if not any(n.startswith((f"binaries/{PLATFORM}/", f"binaries/{PLATFORM_FMI3}/")) and n.endswith(".so")
+                   for n in names):
+            problems.append(f"no binary in binaries/{PLATFORM}/ (FMI 3: binaries/{PLATFORM_FMI3}/; railfmu's packaging)")
         if not any(n.startswith("sources/") and n.endswith(".c") for n in names):
-            problems.append("no C sources in sources/")
+            problems.append("no C sources in sources/ (railfmu's packaging)")
     return problems
+
+
+def built_by_railfmu(path: Path | str) -> bool:
+    """Whether railfmu generated the FMU (modelDescription generationTool "railfmu")."""
+    try:
+        from fmpy import read_model_description
+
+        return (read_model_description(str(path), validate=False).generationTool or "").split(" ")[0] == codegen.GENERATOR
+    except Exception:  # noqa: BLE001 - unreadable: FMPy's validation says why
+        return False
+
+
+def describe(path: Path | str) -> str:
+    """``FMI 2.0 Co-Simulation, by OpenModelica ...``: what an FMU is, for validate's report."""
+    try:
+        from fmpy import read_model_description
+
+        md = read_model_description(str(path), validate=False)
+    except Exception:  # noqa: BLE001
+        return "unreadable"
+    kinds = [k for k, v in (("Co-Simulation", md.coSimulation), ("Model Exchange", md.modelExchange),
+                            ("Scheduled Execution", getattr(md, "scheduledExecution", None))) if v is not None]
+    tool = f", by {md.generationTool}" if md.generationTool else ""
+    return f"FMI {md.fmiVersion} {' and '.join(kinds) or '(no interface)'}{tool}"

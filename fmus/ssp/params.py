@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 from railfmu.models.errors import UserError
 from railfmu.fmus.ssp.units import Affine, UnitError, Units, conversion, from_ssc
-from railfmu.fmus.ssp.xmltools import NS, SSC_NS, SSV_NS, children, local
+from railfmu.fmus.ssp.xmltools import NS, SIZED_TYPES, SSC_NS, SSV_NS, children, local
 from railfmu.fmus.cosim.system import Value
 
 _TRANSFORMS = ("LinearTransformation", "BooleanMappingTransformation", "IntegerMappingTransformation",
@@ -40,7 +40,11 @@ def read_parameter_set(pset, shown: str, outer: Units, owner: str = "") -> list[
         where = f"{shown}:{p.sourceline}: Parameter {name!r}" + (f" of {owner}" if owner else "")
         typed = next((c for c in children(p, SSV_NS) if local(c) != "Annotations"), None)
         kind = local(typed) if typed is not None else None
+        kind = SIZED_TYPES.get(kind, kind)  # SSP 2.0: ssv:Float64 is a Real, ssv:Int32 an Integer
         raw = typed.get("value") if typed is not None else None
+        if kind is not None and raw is None:  # SSP 2.0: ssv:Value children (an array) or a Binary
+            raise UserError(f"{where}: ssv:{local(typed)} without a value attribute (an array or binary "
+                            "value) is not supported")
         if kind == "Real":
             value: Value = float(raw)
         elif kind == "Integer":
@@ -51,7 +55,7 @@ def read_parameter_set(pset, shown: str, outer: Units, owner: str = "") -> list[
             value = raw
         else:
             raise UserError(f"{where}: {kind or 'a missing'} value is not supported "
-                            "(Real, Integer, Boolean, String, Enumeration)")
+                            "(Real, Integer, Boolean, String, Enumeration and SSP 2.0's Float64, Int32, ...)")
         out.append(ParamValue(name, kind, value, typed.get("unit") if kind == "Real" else None, units, where))
     return out
 

@@ -1,9 +1,12 @@
-"""SSP 1.0 experiments as a :class:`railfmu.fmus.cosim.system.System`: read, check, validate, write back.
+"""SSP 1.0 and 2.0 experiments as a :class:`railfmu.fmus.cosim.system.System`: read, check, validate, write back.
 
 :func:`read_system` applies what FMPy's own SSP support skips: parameter bindings in the SSD
 (inline and ``.ssv``), ``.ssm`` mappings, ``ssc:LinearTransformation``, unit checks and
 conversions, ``ssd:DefaultExperiment`` and a fixed step size (``--step-size``, else our or the
-OSP annotation, else the smallest DefaultExperiment stepSize of the FMUs). Parameter
+OSP annotation, else OMSimulator's, else the smallest DefaultExperiment stepSize of the
+FMUs). Nested systems are flattened and system connectors become parameters of the run
+(:mod:`railfmu.fmus.ssp.nested`); a single ``.fmu`` is a system of its own
+(:mod:`railfmu.fmus.ssp.single_fmu`). Parameter
 values, lowest priority first:
 
     FMU start values < component-level bindings (document order) < system-level bindings
@@ -34,6 +37,7 @@ from __future__ import annotations
 
 import difflib
 import math
+import os
 import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -63,9 +67,11 @@ from railfmu.fmus.ssp.units import (
     from_ssc,
     tidy,
 )
+from railfmu.fmus.ssp.nested import flatten
 from railfmu.fmus.ssp.writer import write_ssp
 from railfmu.fmus.ssp.xmltools import (
     NS,
+    SIZED_TYPES,
     SSC_NS,
     Root,
     children,
@@ -82,6 +88,7 @@ from railfmu.fmus.cosim.system import (
     ObserverSpec,
     System,
     Value,
+    carried_type,
     check_system,
     n_steps,
     read_model,
@@ -97,6 +104,7 @@ RECORDER, OBSERVERS, EXPERIMENT, OSP = ("org.railfmu.recorder", "org.railfmu.obs
                                         "org.railfmu.experiment", "com.opensimulationplatform")
 #: the study whose metrics and figures a run gets: ``<rf:Study name="..."/>`` (System.study)
 STUDY = "org.railfmu.study"
+OMS = "org.openmodelica"  # OMSimulator's annotation type
 #: reserved name of a variant parameter (or ``--set``) giving the run's stop time in s
 STOP_TIME = "experiment.stopTime"
 
@@ -107,7 +115,14 @@ def read_system(path, variant: str | None = None, fmu_dirs=(), overrides: dict[s
     """The system of an SSP (a ``.ssd``, a folder holding ``SystemStructure.ssd``, or a
     ``.ssp``) with ``variant`` (a name in ``variants/`` or a path to an ``.ssv``) and
     ``overrides`` ({component: {parameter: value}}) applied. FMUs missing from the SSP are
-    looked up by file name in ``fmu_dirs``. Time arguments override the SSD's."""
+    looked up by file name in ``fmu_dirs``. Time arguments override the SSD's. A single
+    ``.fmu`` is a system of its own (:func:`railfmu.fmus.ssp.single_fmu.system_of_fmu`)."""
+    if _is_fmu(path):
+        from railfmu.fmus.ssp.single_fmu import system_of_fmu
+
+        if variant is not None:
+            raise UserError(f"{path}: a single FMU has no variants (--set sets its parameters)")
+        return system_of_fmu(path, overrides, start_time, stop_time, step_size)
     root = locate(path)
     try:
         system = _Reader(root, fmu_dirs).read(variant, overrides or {}, (start_time, stop_time, step_size))
@@ -122,6 +137,8 @@ def read_system(path, variant: str | None = None, fmu_dirs=(), overrides: dict[s
 def study_name(path) -> str | None:
     """The study an SSP names (our ``org.railfmu.study`` annotation, ``<rf:Study name=...>``),
     or None; reads the SSD only, without FMUs or schema."""
+    if _is_fmu(path):
+        return None
     root = locate(path)
     system = parse_xml(root.ssd, root.show(root.ssd)).find("ssd:System", NS)
     return _study(system) if system is not None else None
@@ -135,7 +152,11 @@ def _study(system_el) -> str | None:
 
 def list_variants(path) -> list[str]:
     """The names of ``variants/*.ssv`` of an experiment folder, ``.ssd`` or ``.ssp``, sorted."""
-    return _variants(locate(path))
+    return [] if _is_fmu(path) else _variants(locate(path))
+
+
+def _is_fmu(path) -> bool:
+    return Path(path).suffix.lower() == ".fmu" and Path(path).is_file()
 
 
 def _variants(root: Root) -> list[str]:
@@ -143,11 +164,14 @@ def _variants(root: Root) -> list[str]:
     return sorted(p.stem for p in folder.glob("*.ssv")) if folder.is_dir() else []
 
 
-def validate_ssp(path, fmu_dirs=()) -> list[str]:
+def validate_ssp(path, fmu_dirs=(), packaging: bool | None = None) -> list[str]:
     """Every problem found in an SSP: schema errors of each .ssd/.ssv/.ssm, unresolved
-    references (the first per variant), and each contained FMU's problems
-    (:func:`railfmu.fmus.generate.build.validate`). [] if none. Raises only if ``path`` does not exist.
-    ``fmu_dirs``: where to look for FMUs the SSP does not contain (an experiment folder)."""
+    references (the first per variant), and the problems of each FMU it holds or its
+    components name (:func:`railfmu.fmus.generate.build.validate`: FMI conformance, and
+    railfmu's packaging rules for the FMUs railfmu built, or for all with ``packaging``), so
+    a folder and the same files zipped as ``.ssp`` validate alike. [] if none. Raises only if
+    ``path`` does not exist. ``fmu_dirs``: where to look for FMUs the SSP does not contain
+    (an experiment folder: railfmu's build, validated by ``railfmu build``)."""
     from railfmu.fmus.generate.build import validate
 
     given = Path(path)
@@ -158,6 +182,7 @@ def validate_ssp(path, fmu_dirs=()) -> list[str]:
     except UserError as exc:
         return [str(exc)]
     problems: list[str] = []
+    fmus: list[Path] = []
     kinds = {".ssd": "ssd", ".ssv": "ssv", ".ssm": "ssm"}
     for f in sorted(root.dir.rglob("*")):
         if f.suffix in kinds and f.is_file():
@@ -166,17 +191,25 @@ def validate_ssp(path, fmu_dirs=()) -> list[str]:
             except UserError as exc:
                 problems.append(str(exc))
         elif f.suffix == ".fmu" and f.is_file():
-            try:
-                problems += [f"{root.show(f)}: {one_line(p)}" for p in validate(f)]
-            except Exception as exc:  # noqa: BLE001 - a broken FMU is a finding here, not a crash
-                problems.append(f"{root.show(f)}: cannot validate: {one_line(exc)}")
+            fmus.append(f)
     for variant in [None, *_variants(root)]:
         try:
-            _Reader(root, fmu_dirs).read(variant, {}, (None, None, None), need_time=False)
+            reader = _Reader(root, fmu_dirs)
+            try:
+                reader.read(variant, {}, (None, None, None), need_time=False)
+            finally:  # the FMUs the components name, outside the SSP's folder too (../fmi2/X.fmu)
+                fmus += [f for f in reader._mds if not any(f.is_relative_to(Path(d).resolve()) for d in fmu_dirs)]
         except UserError as exc:
             problems.append(str(exc))
         except Exception as exc:  # noqa: BLE001 - validation reports, it does not crash
             problems.append(f"{root.show(root.ssd)}: cannot read the SSP ({type(exc).__name__}: {one_line(exc)})")
+    top = root.dir.resolve()
+    for f in dict.fromkeys(Path(f).resolve() for f in fmus):
+        shown = root.show(root.dir / f.relative_to(top)) if f.is_relative_to(top) else os.path.relpath(f)
+        try:
+            problems += [f"{shown}: {one_line(p)}" for p in validate(f, packaging)]
+        except Exception as exc:  # noqa: BLE001 - a broken FMU is a finding here, not a crash
+            problems.append(f"{shown}: cannot validate: {one_line(exc)}")
     return list(dict.fromkeys(problems))  # a schema error also stops the reader: report it once
 
 
@@ -202,6 +235,7 @@ class _Reader:
         self.file = root.show(root.ssd)
         self.doc = parse_checked(root.ssd, "ssd", self.file)
         self.system = self.doc.find("ssd:System", NS)
+        self.flat = flatten(self.system, self.file)  # nested systems' components join the top level
         self.ssd_units = Units(from_ssc(self.doc.find("ssd:Units", NS)))
         self.comps: dict[str, _Comp] = {}
         self._mds: dict[Path, object] = {}
@@ -219,11 +253,18 @@ class _Reader:
     def read(self, variant, overrides, times, need_time: bool = True) -> System:
         elements = self._components()
         connections = self._connections()
+        self._port_parameters()
         for el, comp in elements:  # component level: bare names
             for v in self._bindings(el, f"Component {comp.name!r}"):
                 self._set(comp, v)
-        for v in self._bindings(self.system, ""):
-            self._set(*self._split(v))
+        ported = []  # values of system connectors (so far the only aliases): after every binding,
+        for v in self._bindings(self.system, ""):  # since the connection to a target outranks its binding
+            if v.name in self.aliases:
+                ported.append(v)
+            else:
+                self._set(*self._split(v))
+        for v in ported:
+            self._alias(v.name, v.value, v.where)
         record, observers = self._annotations()
         self.observers = {o.name: o for o in observers}
         self._aliases()
@@ -260,9 +301,6 @@ class _Reader:
         elements = self.system.find("ssd:Elements", NS)
         for el in children(elements) if elements is not None else []:
             kind, name = local(el), el.get("name")
-            if kind == "System":
-                raise UserError(f"{self.at(el)}: System {name!r}: nested systems are not supported; "
-                                "put its components in the top-level system")
             if kind != "Component":
                 raise UserError(f"{self.at(el)}: {kind} {name!r} is not supported")
             out.append((el, self._component(el)))
@@ -322,7 +360,7 @@ class _Reader:
         typed = next(iter(children(el, SSC_NS)), None)
         unit = None
         if typed is not None:
-            if local(typed) != var.type:
+            if SIZED_TYPES.get(local(typed), local(typed)) != var.type:
                 raise UserError(f"{where}: type ssc:{local(typed)} does not match the FMU variable's "
                                 f"type {var.type}")
             unit = typed.get("unit") if var.type == "Real" else None
@@ -334,9 +372,42 @@ class _Reader:
 
     # -- connections ----------------------------------------------------------------------
     def _connections(self) -> list[Connection]:
+        """The connections between components: one that ends at a system's connector (a port,
+        :mod:`railfmu.fmus.ssp.nested`) only carries the signal on; each component input is
+        followed back through ports to the component output that feeds it, or to a port that
+        nothing feeds, which makes it a parameter of the run (:meth:`_port_parameters`)."""
         out, fed = [], {}
+        into: dict[tuple[str, str], list] = {}  # port -> the connections that end at it
+        ends = []
         for el in self.system.iterfind("ssd:Connections/ssd:Connection", NS):
-            c = self._connection(el)
+            d, dc = el.get("endElement", ""), el.get("endConnector")
+            if (d, dc) in self.flat.ports and d not in self.comps:
+                into.setdefault((d, dc), []).append(el)
+            else:
+                ends.append(el)
+        self.port_targets: dict[tuple[str, str], list] = {}
+        for el in ends:
+            src, chain = (el.get("startElement", ""), el.get("startConnector")), [el]
+            while src in self.flat.ports and src[0] not in self.comps:
+                feeders = into.get(src, [])
+                if len(feeders) > 1:
+                    raise UserError(f"{self.at(feeders[1])}: connector {self.flat.ports[src].name} of a system "
+                                    f"is already fed (line {feeders[0].sourceline})")
+                if not feeders:
+                    break
+                chain.append(feeders[0])
+                src = (feeders[0].get("startElement", ""), feeders[0].get("startConnector"))
+                if len(chain) > len(self.flat.ports) + 1:
+                    raise UserError(f"{self.at(el)}: Connection: a loop of system connectors")
+            unfed = src in self.flat.ports and src[0] not in self.comps
+            for k in chain[1:] if not unfed else chain:  # a system connector's value is set as it is
+                if children(k, SSC_NS):
+                    raise UserError(f"{self.at(k)}: a transformation on a connection to a system connector "
+                                    "is not supported")
+            if unfed:  # fed by nothing: a parameter of the run
+                self.port_targets.setdefault(src, []).append(el)
+                continue
+            c = self._connection(el, src)
             if (c.dst, c.dst_var) in fed:
                 raise UserError(f"{self.at(el)}: Connection {c}: input {c.dst}.{c.dst_var} is already "
                                 f"connected (line {fed[c.dst, c.dst_var]})")
@@ -344,12 +415,30 @@ class _Reader:
             out.append(c)
         return out
 
-    def _connection(self, el) -> Connection:
+    def _port_parameters(self) -> None:
+        """A system connector that nothing feeds (OMSimulator's top-level ``Input_cref``, a
+        parameter connector of a nested system) is a parameter of the run: its value, bound
+        by its name (``Input_cref``, ``sub.c``; ``--set <system>.Input_cref=...``), is set on
+        every component input it reaches. Unbound, the inputs keep their start values."""
+        self.aliases = {}
+        for key, port in self.flat.ports.items():  # a value bound to a connector that reaches nothing is inert
+            targets = []
+            for el in self.port_targets.get(key, []):
+                d, dc = el.get("endElement"), el.get("endConnector")
+                where = f"{self.at(el)}: Connection {port.name} -> {d}.{dc}"
+                comp, _ = self._end(d, dc, where)
+                self._settable(comp, dc, where)
+                targets.append(("connector", comp.name, dc))
+            self.aliases[port.name] = (targets, f"{self.file}:{port.line}: Connector {port.name!r}")
+
+    def _connection(self, el, src: tuple[str, str] | None = None) -> Connection:
+        """``el`` as a connection; ``src``: its start when it comes through system connectors."""
         s, sc, d, dc = (el.get(a) for a in ("startElement", "startConnector", "endElement", "endConnector"))
+        if src is not None:
+            s, sc = src
         where = f"{self.at(el)}: Connection {s or ''}.{sc} -> {d or ''}.{dc}"
-        if s is None or d is None:
-            raise UserError(f"{where}: connections to system-level connectors are not supported "
-                            "(connect the components directly)")
+        if not s or not d:
+            raise UserError(f"{where}: no system connector {sc if not s else dc!r}")
         src, svar = self._end(s, sc, where)
         dst, dvar = self._end(d, dc, where)
         if svar.causality not in ("output", "parameter", "calculatedParameter"):
@@ -357,7 +446,7 @@ class _Reader:
                             "an output (or a parameter)")
         if dvar.causality != "input":
             raise UserError(f"{where}: end {d}.{dc} is a(n) {dvar.causality}; a connection ends at an input")
-        if svar.type != dvar.type:
+        if carried_type(svar.type) != carried_type(dvar.type):  # Integer <-> Enumeration: both fmi2Integer
             raise UserError(f"{where}: type mismatch: {svar.type} -> {dvar.type} (a connection joins "
                             "two variables of one type)")
         factor, offset = self._connection_map(el, where, src, svar, dst, dvar)
@@ -609,7 +698,7 @@ class _Reader:
         A variant or ``--set line.file=...`` sets every target; ``value`` (optional) is applied
         with the system-level bindings. A String ``resources/...`` names a file of the SSP for
         an observer setting too. Returns ``{name: ([(kind, owner, name)], where)}``."""
-        out: dict = {}
+        out: dict = dict(self.aliases)  # the system connectors' (_port_parameters)
         a = self._annotation(self.system, PARAMETERS)
         for el in a.iterfind("rf:Parameters/rf:Parameter", NS) if a is not None else []:
             name, where = el.get("name") or "", f"{self.at(el)}: Parameter {el.get('name')!r}"
@@ -658,6 +747,9 @@ class _Reader:
 
     def _alias(self, name: str, value, where: str) -> bool:
         """Set every target of the system parameter ``name`` (:meth:`_aliases`); False if none."""
+        top = self.system.get("name") or ""
+        if name not in self.aliases and name.startswith(top + ".") and name[len(top) + 1:] in self.aliases:
+            name = name[len(top) + 1:]  # a system connector as --set names it: <system>.Input_cref
         if name not in self.aliases:
             return False
         targets, _ = self.aliases[name]
@@ -687,6 +779,14 @@ class _Reader:
             if not values:
                 continue
             comp = self.comps.get(cname)
+            nested = [c for c in self.comps if c.startswith(cname + ".")]
+            if comp is None and nested:  # a nested system's component: --set sub.comp.param=...
+                for key, value in values.items():
+                    comp, v = self._split(ParamValue(f"{cname}.{key}", "", value, None, None, f"--set {cname}.{key}"))
+                    where = f"--set {comp.name}.{v.name}"
+                    var = self._settable(comp, v.name, where)
+                    comp.params[v.name] = self._resource(var, from_cli(value, var, where), where, f"{comp.name}.{v.name}")
+                continue
             if comp is None:
                 first = next(iter(values), "?")
                 raise UserError(f"--set {cname}.{first}: no component {cname!r}"
@@ -711,8 +811,8 @@ class _Reader:
         if de is not None:
             start = start if start is not None else self._number(de, "startTime")
             stop = stop if stop is not None else self._number(de, "stopTime")
-            if step is None:
-                step, self.step_from = self._step(de)
+        if step is None:
+            step, self.step_from = self._step(de)
         if step is None:
             step, self.step_from = self._fmu_step()
         start = 0.0 if start is None else float(start)
@@ -745,15 +845,27 @@ class _Reader:
         return name
 
     def _step(self, de) -> tuple[float | None, str]:
-        """Our rf:FixedStep, else libcosim's osp:FixedStepAlgorithm."""
-        a = self._annotation(de, EXPERIMENT)
-        fs = a.find("rf:FixedStep", NS) if a is not None else None
-        if fs is not None and fs.get("stepSize") is not None:  # it may name just the master
-            return self._number(fs, "stepSize"), f"the {EXPERIMENT} annotation"
-        a = self._annotation(de, OSP)
-        fs = a.find("osp:Algorithm/osp:FixedStepAlgorithm", NS) if a is not None else None
-        if fs is not None:
-            return self._number(fs, "baseStepSize"), f"the {OSP} annotation"
+        """Our rf:FixedStep, else libcosim's osp:FixedStepAlgorithm (on ssd:DefaultExperiment),
+        else OMSimulator's oms:FixedStepMaster on the top-level system (what ``railfmu
+        export`` writes too), else on a nested one (the smallest)."""
+        if de is not None:
+            a = self._annotation(de, EXPERIMENT)
+            fs = a.find("rf:FixedStep", NS) if a is not None else None
+            if fs is not None and fs.get("stepSize") is not None:  # it may name just the master
+                return self._number(fs, "stepSize"), f"the {EXPERIMENT} annotation"
+            a = self._annotation(de, OSP)
+            fs = a.find("osp:Algorithm/osp:FixedStepAlgorithm", NS) if a is not None else None
+            if fs is not None:
+                return self._number(fs, "baseStepSize"), f"the {OSP} annotation"
+        for systems in ([self.system], self.flat.systems):
+            steps = []
+            for el in systems:
+                a = self._annotation(el, OMS)
+                fs = a.find("oms:Annotations/oms:SimulationInformation/oms:FixedStepMaster", NS) if a is not None else None
+                if fs is not None and fs.get("stepSize") is not None:
+                    steps.append(self._number(fs, "stepSize"))
+            if steps:
+                return min(steps), f"the {OMS} annotation (oms:FixedStepMaster)"
         return None, ""
 
     def _fmu_step(self) -> tuple[float | None, str]:
@@ -916,12 +1028,13 @@ class _Reader:
 
     def _unconnected(self, connections: list[Connection]) -> list[str]:
         fed = {(c.dst, c.dst_var) for c in connections}
+        ported = {(o, p) for targets, _ in self.aliases.values() for kind, o, p in targets if kind == "connector"}
         out = []
         for comp in self.comps.values():
             for var in comp.md.modelVariables:
                 # an input the SSD/SSV binds to a value is unconnected on purpose: no warning
                 if (var.causality == "input" and (comp.name, var.name) not in fed
-                        and var.name not in comp.params):
+                        and var.name not in comp.params and (comp.name, var.name) not in ported):
                     out.append(f"{comp.name}.{var.name}: input not connected; keeps its start value "
                                f"{_show(var.start)}")
         return out

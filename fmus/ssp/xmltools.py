@@ -1,4 +1,4 @@
-"""Where an SSP's files are, and its XML parsed and checked against the SSP 1.0 schemas.
+"""Where an SSP's files are, and its XML parsed and checked against the SSP 1.0 or 2.0 schemas.
 
 An SSP is a folder (or a ``.ssp`` zip) whose ``SystemStructure.ssd`` refers to FMUs, ``.ssv``
 and ``.ssm`` files by URIs relative to that folder: the SSP root. Messages name files as the
@@ -33,8 +33,15 @@ OMS_NS = "https://raw.githubusercontent.com/OpenModelica/OMSimulator/master/sche
 NS = {"ssd": SSD_NS, "ssc": SSC_NS, "ssv": SSV_NS, "ssm": SSM_NS, "rf": RF_NS, "osp": OSP_NS, "oms": OMS_NS}
 
 SCHEMA_DIR = Path(fmpy.__file__).parent / "ssp" / "schema"
+# SSP 2.0 keeps the SSP1 namespaces and tells itself apart by version="2.0"; its schemas (from
+# the standard, BSD 2-clause) add the sized types (ssc:Float64, Int32, ...), Enumeration and
+# Binary connectors and new attributes
+SCHEMA_DIR_2 = Path(__file__).parent / "schema2"
 _SCHEMA_FILES = {"ssd": "SystemStructureDescription.xsd", "ssv": "SystemStructureParameterValues.xsd",
                  "ssm": "SystemStructureParameterMapping.xsd"}
+#: SSP 2.0's sized types (ssc: on connectors, ssv: in parameter sets) as the FMI 2.0 type they carry
+SIZED_TYPES = {"Float64": "Real", "Float32": "Real",
+               **{t: "Integer" for t in ("Int8", "UInt8", "Int16", "UInt16", "Int32", "UInt32", "Int64", "UInt64")}}
 # no DTDs, no entities, no network: an SSP is untrusted input
 _PARSER = etree.XMLParser(resolve_entities=False, no_network=True, load_dtd=False)
 
@@ -165,8 +172,20 @@ def _extract(archive: Path) -> Path:
 # -- XML and schema ------------------------------------------------------------------------
 
 @functools.cache
-def schema(kind: str) -> etree.XMLSchema:
-    return etree.XMLSchema(etree.parse(str(SCHEMA_DIR / _SCHEMA_FILES[kind])))
+def schema(kind: str, version: str = "1.0") -> etree.XMLSchema:
+    folder = SCHEMA_DIR_2 if version == "2.0" else SCHEMA_DIR
+    return etree.XMLSchema(etree.parse(str(folder / _SCHEMA_FILES[kind])))
+
+
+def ssp_version(el, shown: str) -> str:
+    """"1.0" or "2.0": which SSP a document (or an inline parameter set) is, by its version
+    attribute; any other version is refused in one line before a schema sees it."""
+    text = (el.get("version") or "1.0").strip()
+    if text == "2.0" or text.startswith("2.0."):
+        return "2.0"
+    if text.startswith("1."):
+        return "1.0"
+    raise UserError(f"{shown}:{el.sourceline}: SSP version {text!r} is not supported (SSP 1.0 and 2.0 are)")
 
 
 def _short(message: str) -> str:
@@ -180,7 +199,10 @@ def schema_problems(el, kind: str, shown: str) -> list[str]:
     """Every schema error of a document (or an inline ssv:ParameterSet/ssm:ParameterMapping),
     as 'file:line: schema: message'. The SSD 1.0 schema takes inline parameter sets and
     mappings as lax 'any' content, so those are checked against their own schemas here."""
-    s = schema(kind)
+    try:
+        s = schema(kind, ssp_version(el, shown))
+    except UserError as exc:
+        return [str(exc)]
     problems = []
     if not s.validate(el):
         problems += [f"{shown}:{e.line}: schema: {_short(e.message)}" for e in s.error_log]
@@ -217,7 +239,7 @@ def parse_xml(file: Path, shown: str):
 
 
 def parse_checked(file: Path, kind: str, shown: str):
-    """Parse and validate against the SSP 1.0 schema of ``kind`` (ssd, ssv, ssm); the first
+    """Parse and validate against the SSP 1.0 or 2.0 schema of ``kind`` (ssd, ssv, ssm); the first
     problem is raised as a one-line UserError."""
     el = parse_xml(file, shown)
     expected = {"ssd": (SSD_NS, "SystemStructureDescription"), "ssv": (SSV_NS, "ParameterSet"),
