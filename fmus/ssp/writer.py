@@ -64,7 +64,7 @@ def write_ssp(system: System, out: Path) -> Path:
     strings = {c.name: _string_values(c, files[c.name]) for c in system.components}
     baked = {c.name: _baked(c, strings[c.name]) for c in system.components}
     generic = _generic_units(system)
-    own = {c.name for c in system.components if generic.get(c.name) or baked[c.name]}
+    own = {c.name for c in system.components if generic.get(c.name) or baked[c.name] or files[c.name]}
     resources = _resource_names(system, own)
     doc = _document(system, mds, resources, strings, generic)
     problems = schema_problems(doc, "ssd", "SystemStructure.ssd")

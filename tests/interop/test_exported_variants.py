@@ -29,6 +29,7 @@ CI runs ``QUICK`` (each experiment once, both tools).
 from __future__ import annotations
 
 import os
+import re
 import shutil
 import subprocess
 import sys
@@ -253,3 +254,56 @@ def test_a_replay_runs_to_its_data_end(tmp_path):
     (comp, file), = replays_of(system)
     table = read_replay(comp, file, {})
     assert system.stop_time == pytest.approx(table.time[-1], abs=1e-12) and table.time[-1] > 1.0
+
+
+def _break_table(ssp: Path, component: str, table: str, how: str, out: Path) -> Path:
+    """A copy of ``ssp`` whose ``component`` FMU has its ``table`` removed or emptied."""
+    import io
+    import zipfile
+
+    with zipfile.ZipFile(ssp) as z, zipfile.ZipFile(out, "w") as o:
+        for info in z.infolist():
+            data = z.read(info)
+            if info.filename == f"resources/{component}_SignalTable.fmu":
+                buf = io.BytesIO()
+                with zipfile.ZipFile(io.BytesIO(data)) as f, zipfile.ZipFile(buf, "w") as g:
+                    for item in f.infolist():
+                        if item.filename != f"resources/{table}":
+                            g.writestr(item, f.read(item))
+                        elif how == "empty":
+                            g.writestr(item, b"")
+                data = buf.getvalue()
+            o.writestr(info, data)
+    return out
+
+
+@pytest.mark.parametrize("how,message", [("missing", "cannot open"), ("empty", "empty file")])
+@pytest.mark.parametrize("tool", TOOLS)
+def test_a_missing_or_empty_table_fails_initialisation_naming_the_parameter(tmp_path, tool, how, message):
+    """Never a silent run on zeros: the replay's table FMU refuses fmi2ExitInitializationMode
+    and logs ``file <path>: ...`` (the parameter's name). OMSimulator logs it and simulates
+    nothing; libcosim throws from its worker thread, which ends the process (std::terminate),
+    hence a child process."""
+    if tool == "omsimulator" and not (OMS and Path(OMS).is_file()):
+        pytest.skip("OMSimulator not found (set RAILFMU_OMSIMULATOR or PATH)")
+    if tool == "libcosim" and not HAVE_LIBCOSIM:
+        pytest.skip("libcosimpy is not installed")
+    from railfmu.experiments.engine.api import export_system
+
+    ssp, system = export_system("alignment_replay", tmp_path / "a.ssp", "measured", stop_time=1.0)
+    table = Path(next(c for c in system.components if c.name == "replay").parameters["file"]).name
+    broken = _break_table(ssp, "replay", table, how, tmp_path / "broken.ssp")
+    if tool == "omsimulator":
+        log, t, _ = run_omsimulator(broken, 1.0)
+        assert "exitInitializationMode failed" in log and t.size == 0, log[-2000:]
+    else:
+        code = ("from libcosimpy.CosimExecution import CosimExecution\n"
+                "from libcosimpy.CosimLogging import CosimLogLevel, log_output_level\n"
+                "log_output_level(CosimLogLevel.WARNING)\n"
+                f"e = CosimExecution.from_ssp_file({str(broken)!r}, step_size=1_000_000)\n"
+                "print('ran' if e.simulate_until(1_000_000_000) else 'refused')\n")
+        res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+        log = res.stdout + res.stderr
+        assert "ran" not in res.stdout.split(), log[-2000:]
+    # the parameter's name, then the resolved path in the FMU's unpacked resources/
+    assert re.search(rf"\bfile \S+/resources/{re.escape(table)}(, line 1)?: {message}", log), log[-2000:]
