@@ -242,18 +242,25 @@ def test_exported_variant_runs_like_railfmu(exported, tool, experiment, variant)
     assert worst[top] <= _tolerance(experiment, variant), sorted(worst.items(), key=lambda kv: -kv[1])[:5]
 
 
-def test_a_replay_runs_to_its_data_end(tmp_path):
-    """Exported without a stop time, a replay's SSD ends where its table does, so a tool that
-    runs the archive as it is reads the whole table and nothing after it."""
+REPLAYS = ["alignment_replay", "suspension_replay", "train_resistance_measured", "trolley_imu_replay",
+           "trolley_survey_replay"]  # the experiments that play a measured table
+
+
+@pytest.mark.parametrize("experiment", REPLAYS)
+def test_a_replay_runs_to_its_data_end(tmp_path, experiment):
+    """Exported without a stop time, a replay's SSD ends where the table that ends the run does
+    (its last row), so a tool that runs the archive as it is reads the whole table and nothing
+    after it."""
     from railfmu.experiments.engine.api import export_system
     from railfmu.experiments.engine.replay import read_replay, replays_of
     from railfmu.fmus.ssp import read_system
 
-    ssp, _ = export_system("alignment_replay", tmp_path / "a.ssp", "measured")
+    ssp, _ = export_system(experiment, tmp_path / "a.ssp")
     system = read_system(ssp)
-    (comp, file), = replays_of(system)
-    table = read_replay(comp, file, {})
-    assert system.stop_time == pytest.approx(table.time[-1], abs=1e-12) and table.time[-1] > 1.0
+    tables = [read_replay(c, f, {}) for c, f in replays_of(system)]
+    ends = [t.time[-1] for t in tables if t.ends_run]
+    assert len(ends) == 1 and ends[0] > 1.0
+    assert system.stop_time == pytest.approx(ends[0], rel=1e-15)
 
 
 def _break_table(ssp: Path, component: str, table: str, how: str, out: Path) -> Path:
