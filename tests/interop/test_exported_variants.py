@@ -1,9 +1,10 @@
 """Every exported variant of every experiment runs unedited in OMSimulator 3.0 and in libcosim
 (libcosimpy, FMI 2) and gives railfmu's trajectories.
 
-For each variant: ``railfmu export --stop-time T`` writes the archive; our master runs it
-(:func:`railfmu.fmus.ssp.read_system` on the archive alone: Jacobi, or for OMSimulator the
-master that passes outputs as it does, ``OMS_MASTER``); each tool runs the same file.
+For each variant: ``railfmu export --stop-time T`` writes the archive; our Jacobi master runs
+it (:func:`railfmu.fmus.ssp.read_system` on the archive alone; for OMSimulator with the
+connections copied in dependency order, as OMSimulator passes them: see ``exported``); each
+tool runs the same file.
 
 * OMSimulator (``OMSimulator --stopTime=T --resultFile=x.mat``): it exits 0 even after
   errors, so its log is read and any ``error:`` line fails. The .mat result holds doubles (its
@@ -56,10 +57,10 @@ RTOL = 1e-9  # of a signal's range: same binaries, same steps; only the time arg
 TOLERANCE: dict[str, tuple[float, str]] = {}
 # OMSimulator's fixed-step master steps every FMU, then passes the outputs on in the order of
 # its dependency graph, so an output that feeds through an input (the driver's command from
-# the train's speed) reaches its receiver in the same exchange, as in our Gauss-Seidel master;
-# libcosim and our Jacobi master pass it one step later. Elsewhere every connection leaves an
-# output that does not feed through, and OMSimulator samples like our Jacobi master.
-OMS_MASTER = {"train_resistance": "gauss-seidel"}
+# the train's speed) reaches its receiver in the same exchange: our Jacobi master with the
+# connections copied in that order (as our Gauss-Seidel master orders its transfer). libcosim
+# copies every output read after the step at once, as our Jacobi master in the SSD's order does
+# here (the driver's command before the train's speed reaches the driver).
 TABLE_RTOL = 1e-12  # a replay's table signals: a held or interpolated row, the same in any master
 
 
@@ -90,13 +91,15 @@ def _cases():
 
 @pytest.fixture(scope="module")
 def exported(tmp_path_factory):
-    """(experiment, variant, master) -> (archive, system read back, our run): once per module."""
+    """(experiment, variant, ordered) -> (archive, system read back, our Jacobi run, with the
+    connections copied in dependency order if ``ordered``): once per module."""
     cache: dict = {}
     folder = tmp_path_factory.mktemp("exported")
 
-    def get(experiment: str, variant: str, master: str = "jacobi"):
-        key = (experiment, variant, master)
+    def get(experiment: str, variant: str, ordered: bool = False):
+        key = (experiment, variant, ordered)
         if key not in cache:
+            from railfmu.fmus.cosim.masters import _transfer_order
             from railfmu.fmus.cosim.masters import run as run_master
             from railfmu.fmus.ssp import read_system
 
@@ -109,7 +112,10 @@ def exported(tmp_path_factory):
                 assert res.returncode == 0, res.stderr
             system = read_system(ssp)
             assert system.stop_time == stop
-            cache[key] = ssp, system, run_master(system, master=master, progress=False)
+            if ordered:  # the order Gauss-Seidel's consistent transfer uses
+                order = _transfer_order(system, {c.name: c.md for c in system.components})
+                system.connections = [system.connections[i] for i in order]
+            cache[key] = ssp, system, run_master(system, master="jacobi", progress=False)
         return cache[key]
 
     return get
@@ -212,8 +218,7 @@ def test_exported_variant_runs_like_railfmu(exported, tool, experiment, variant)
         pytest.skip("OMSimulator not found (set RAILFMU_OMSIMULATOR or PATH)")
     if tool == "libcosim" and not HAVE_LIBCOSIM:
         pytest.skip("libcosimpy is not installed")
-    master = OMS_MASTER.get(experiment, "jacobi") if tool == "omsimulator" else "jacobi"
-    ssp, system, ours = exported(experiment, variant, master)
+    ssp, system, ours = exported(experiment, variant, ordered=tool == "omsimulator")
     signals = _compared(system, ours)
     if tool == "omsimulator":
         log, t, theirs = run_omsimulator(ssp, system.stop_time)
@@ -235,7 +240,7 @@ def test_exported_variant_runs_like_railfmu(exported, tool, experiment, variant)
             worst[s] = float(np.max(np.abs(theirs[s] - ref)) / np.ptp(ref))
     assert worst, "no signal that moves to compare"
     top = max(worst, key=worst.get)
-    print(f"{tool} {experiment}/{variant} (our {master}): {len(worst)} signals, worst {worst[top]:.1e} of range ({top})")
+    print(f"{tool} {experiment}/{variant}: {len(worst)} signals, worst {worst[top]:.1e} of range ({top})")
     tables = _tables(system) & set(worst)
     if tables:
         assert max(worst[s] for s in tables) <= TABLE_RTOL, {s: worst[s] for s in tables}
