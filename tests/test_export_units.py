@@ -135,3 +135,19 @@ def test_a_guid_that_only_starts_like_the_binary_s_is_refused(fmu_dir):
     for other in (guid + "0a1b", guid + "-", guid[:-2] + "}"):
         with pytest.raises(Exception, match="Failed to instantiate"):
             _first_outputs(fmu, other)
+
+
+def test_a_start_value_with_xml_entities_reaches_the_fmu(fmu_dir, tmp_path):
+    """The runtime decodes what lxml escapes in an attribute (& < > " and a tab as &#9;)."""
+    from railfmu.fmus.ssp.writer import _instance_copy
+
+    column, name = "a&b <c> 'd'\tü", 't&"x".csv'  # the CSV reader takes no quoted header: the quote is in the file name
+    table = tmp_path / "t.csv"
+    table.write_text(f"time,{column}\n0,2.5\n1,3.5\n", encoding="utf-8")
+    copy = tmp_path / "copy.fmu"
+    copy.write_bytes(_instance_copy(fmu_dir / "SignalTable.fmu", "x", {table: name}, None,
+                                    {"file": name, "column_1": column}))
+    with zipfile.ZipFile(copy) as zf:
+        md = zf.read("modelDescription.xml").decode()
+    assert "a&amp;b &lt;c&gt; 'd'&#9;ü" in md and "t&amp;&quot;x&quot;.csv" in md  # what the runtime decodes
+    assert _first_outputs(copy)["y_1"] == 2.5
