@@ -8,9 +8,10 @@ tool runs the same file.
 
 * OMSimulator (``OMSimulator --stopTime=T --resultFile=x.mat``): it exits 0 even after
   errors, so its log is read and any ``error:`` line fails. The .mat result holds doubles (its
-  CSV prints 12 digits). It advances time as t += h and writes a row again at the same time
-  after an event, and one more row past the last step when the sum overshoots T by an ulp:
-  rows are matched by time (1e-9 of the step) and the extra row is dropped.
+  CSV prints 12 digits). It advances time as t += h, which falls short of T by rounding
+  (2000 steps of 1 ms end at 2 - 1.1e-13), then steps the rest to T: one extra final row, a
+  few 1e-13 s after the previous one, which is dropped; the others match ours by time (to
+  1e-9 of the step). Rows written again at one time (after an event) count once.
 * libcosim (``CosimExecution.from_ssp_file`` with the archive's step): its own SSP loader,
   time in integer nanoseconds.
 
@@ -206,7 +207,7 @@ def test_exported_variant_runs_like_railfmu(exported, tool, experiment, variant)
         assert not errors, "\n".join(errors[:10])
         assert "terminate called" not in log, log[-2000:]
         n = len(ours.data)
-        # t += h: at most one row past the stop time, where the sum overshoots it by an ulp
+        # t += h: one extra final row where the sum falls short of the stop time (module docstring)
         assert n <= len(t) <= n + 1 and np.allclose(t[:n], ours.data[:, 0], rtol=0, atol=1e-9 * system.step_size)
         theirs = {s: x[:n] for s, x in theirs.items() if s in signals}
         assert set(theirs) == set(signals), sorted(set(signals) - set(theirs))[:5]
