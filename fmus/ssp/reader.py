@@ -105,6 +105,7 @@ RECORDER, OBSERVERS, EXPERIMENT, OSP = ("org.railfmu.recorder", "org.railfmu.obs
 #: the study whose metrics and figures a run gets: ``<rf:Study name="..."/>`` (System.study)
 STUDY = "org.railfmu.study"
 OMS = "org.openmodelica"  # OMSimulator's annotation type
+STRINGS = "org.railfmu.strings"
 #: reserved name of a variant parameter (or ``--set``) giving the run's stop time in s
 STOP_TIME = "experiment.stopTime"
 
@@ -257,6 +258,10 @@ class _Reader:
         for el, comp in elements:  # component level: bare names
             for v in self._bindings(el, f"Component {comp.name!r}"):
                 self._set(comp, v)
+        a = self._annotation(self.system, STRINGS)  # an exported archive's String values (writer.py)
+        pset = a.find("ssv:ParameterSet", NS) if a is not None else None
+        for v in read_parameter_set(pset, self.file, self.ssd_units) if pset is not None else []:
+            self._set(*self._split(v))
         ported = []  # values of system connectors (so far the only aliases): after every binding,
         for v in self._bindings(self.system, ""):  # since the connection to a target outranks its binding
             if v.name in self.aliases:

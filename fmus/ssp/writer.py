@@ -6,25 +6,32 @@ What other importers need is kept explicit: every component carries ONE inline
 the step size is written as our ``rf:FixedStep``, as libcosim's ``osp:FixedStepAlgorithm``
 and as OMSimulator's fixed-step master (an ``org.openmodelica`` annotation, the FIRST of the
 system's annotations: OMSimulator 3.0 reads only the first ``ssc:Annotation`` of a system),
-and each connection's affine map is a ``ssc:LinearTransformation``. A file that a String
-parameter names (a measured table, a track profile) goes into that component's FMU, in its
-``resources/``, and the parameter names it relative to there: our FMUs resolve a relative
-file against their ``resources/``, which every importer (FMPy, libcosim, OMSimulator)
-provides, so the archive runs anywhere without the original file. Components that share an
-FMU share one copy holding all their files (libcosim unpacks an FMU once per GUID, so two
-copies that differ only in resources/ would find one set of files). Reading the archive back
-gives an equal System (apart from paths and those file names).
+and each connection's affine map is a ``ssc:LinearTransformation``.
+
+String parameters (a measured table's file and column names, a track profile, a line file)
+reach the FMU without ``ssv:String``, which OMSimulator 3.0 does not read (it logs
+"Failed to import ssv:Parameter: Unknown ParameterBinding-type" for each): a component whose
+String values differ from its FMU's start values gets its own copy of the FMU whose
+modelDescription.xml has them as start values, with the files they name in the copy's
+``resources/`` and named relative to there (our runtime takes its String start values from
+the unpacked modelDescription.xml and resolves a relative file against ``resources/``,
+which every importer provides). The copy's GUID is the binary's plus ``-`` and a suffix (the
+runtime accepts that), so importers that unpack an FMU once per GUID (libcosim) keep the
+copies apart. The SSD keeps the String values for railfmu in an ``org.railfmu.strings``
+annotation (an ``ssv:ParameterSet`` of ``component.parameter`` names), which other tools
+ignore; reading the archive back gives an equal System (apart from paths and file names).
 
 A generic FMU (StepSource, SensorNoise, SignalTable) has unit-less channels; the SSD gives
 them a unit on its connectors. Importers that take a connection's units from the FMUs
 (OMSimulator 3.0: "Unit mismatch in connection") would refuse ``fault.y -> coach.k1``, so
 such a component gets its own copy of the FMU whose modelDescription declares those units
-(a unit is no part of the C code: same binary, same GUID; every copy carries all files of
-the FMU, for libcosim). The SSD connectors keep the units, so railfmu reads the same System.
+(a unit is no part of the C code: same binary). The SSD connectors keep the units, so
+railfmu reads the same System.
 """
 
 from __future__ import annotations
 
+import hashlib
 import io
 import os
 import zipfile
@@ -54,10 +61,12 @@ def write_ssp(system: System, out: Path) -> Path:
     check_system(system)
     mds = {c.name: c.md for c in system.components}
     files = {c.name: _parameter_files(c) for c in system.components}
-    bundles = _bundles(system, files)
+    strings = {c.name: _string_values(c, files[c.name]) for c in system.components}
+    baked = {c.name: _baked(c, strings[c.name]) for c in system.components}
     generic = _generic_units(system)
-    resources = _resource_names(system, generic)
-    doc = _document(system, mds, resources, files, generic)
+    own = {c.name for c in system.components if generic.get(c.name) or baked[c.name] or files[c.name]}
+    resources = _resource_names(system, own)
+    doc = _document(system, mds, resources, strings, generic)
     problems = schema_problems(doc, "ssd", "SystemStructure.ssd")
     if problems:  # our own output: a bug, not a user error
         raise RuntimeError(f"write_ssp produced an invalid SSD: {problems[0]}")
@@ -72,9 +81,9 @@ def write_ssp(system: System, out: Path) -> Path:
                 if resources[c.name] in written:
                     continue
                 written.add(resources[c.name])
-                bundle = bundles[Path(c.fmu).resolve()]
-                if bundle or generic.get(c.name):
-                    zf.writestr(resources[c.name], _with_resources(Path(c.fmu), bundle, generic.get(c.name)))
+                if c.name in own:
+                    zf.writestr(resources[c.name], _instance_copy(Path(c.fmu), c.name, dict(files[c.name].values()),
+                                                                  generic.get(c.name), baked[c.name]))
                 else:
                     zf.write(c.fmu, resources[c.name])
         os.replace(tmp, out)  # a reader never sees half an archive
@@ -100,13 +109,13 @@ def _generic_units(system: System) -> dict[str, dict]:
     return out
 
 
-def _resource_names(system: System, generic: dict[str, dict] | None = None) -> dict[str, str]:
+def _resource_names(system: System, own: set[str] = frozenset()) -> dict[str, str]:
     """Component -> 'resources/<file>.fmu': one copy per FMU file, distinct names; a component
-    whose FMU declares units for it (``generic``) has its own copy."""
+    in ``own`` (units or String start values of its own) has its own copy."""
     by_file: dict[Path, str] = {}
     out = {}
     for c in system.components:
-        if (generic or {}).get(c.name):
+        if c.name in own:
             out[c.name] = f"resources/{c.name}_{Path(c.fmu).name}"
             continue
         fmu = Path(c.fmu).resolve()
@@ -117,20 +126,21 @@ def _resource_names(system: System, generic: dict[str, dict] | None = None) -> d
     return out
 
 
-def _bundles(system: System, files: dict[str, dict[str, tuple[Path, str]]]) -> dict[Path, dict[Path, str]]:
-    """FMU file -> the files its one copy carries ({path: name in resources/}): those of every
-    component that uses it, a name taken by another file renamed ``<component>_<name>`` (in
-    ``files`` too, so each component's parameter names its own)."""
-    out: dict[Path, dict[Path, str]] = {}
-    for c in system.components:
-        bundle = out.setdefault(Path(c.fmu).resolve(), {})
-        for param, (path, inner) in list(files[c.name].items()):
-            if path not in bundle and inner in bundle.values():
-                inner = f"{c.name}_{inner}"
-                files[c.name][param] = (path, inner)
-            bundle.setdefault(path, inner)
-            files[c.name][param] = (path, bundle[path])
+def _string_values(c, files: dict[str, tuple[Path, str]]) -> dict[str, str]:
+    """The component's String parameter values as the archive gives them: a file it names by
+    its name in the FMU copy's resources/."""
+    out = {}
+    for name, value in c.parameters.items():
+        var = c.variables.get(name)
+        if var is not None and var.type == "String":
+            out[name] = files[name][1] if name in files else str(value)
     return out
+
+
+def _baked(c, strings: dict[str, str]) -> dict[str, str]:
+    """The String values that differ from the FMU's start values (its copy declares them)."""
+    start = {v.name: v.start or "" for v in c.md.modelVariables if v.type == "String"}
+    return {n: v for n, v in strings.items() if v != start.get(n, "")}
 
 
 def _parameter_files(c) -> dict[str, tuple[Path, str]]:
@@ -152,15 +162,17 @@ def _parameter_files(c) -> dict[str, tuple[Path, str]]:
     return out
 
 
-def _with_resources(fmu: Path, files: dict[Path, str], units: dict | None = None) -> bytes:
-    """The FMU archive with ``files`` ({path: name}) added to its resources/ and ``units``
-    ({variable: Unit}) declared in its modelDescription (the rest copied unchanged)."""
+def _instance_copy(fmu: Path, component: str, files: dict[Path, str], units: dict | None,
+                   strings: dict[str, str]) -> bytes:
+    """The FMU archive with ``files`` ({path: name}) added to its resources/, and in its
+    modelDescription ``units`` ({variable: Unit}) declared, ``strings`` ({variable: value})
+    as start values and a GUID of its own (the rest copied unchanged)."""
     buf = io.BytesIO()
     with zipfile.ZipFile(fmu) as src, zipfile.ZipFile(buf, "w", zipfile.ZIP_DEFLATED) as dst:
         for info in src.infolist():
             data = src.read(info)
-            if units and info.filename == "modelDescription.xml":
-                data = _declare_units(data, units)
+            if info.filename == "modelDescription.xml":
+                data = _instance_md(data, component, units or {}, strings)
             dst.writestr(info, data)
         for path, inner in files.items():
             dst.write(path, f"resources/{inner}")
@@ -171,16 +183,31 @@ _MD_AFTER_UNITS = ("TypeDefinitions", "LogCategories", "DefaultExperiment", "Ven
                    "ModelVariables")  # FMI 2.0 order: UnitDefinitions comes before these
 
 
-def _declare_units(md_xml: bytes, units: dict) -> bytes:
-    """modelDescription.xml with ``unit`` on the Real of each variable in ``units`` and each
-    unit defined in UnitDefinitions (with its SI base units, factor and offset)."""
+def _instance_md(md_xml: bytes, component: str, units: dict, strings: dict[str, str]) -> bytes:
+    """modelDescription.xml with ``unit`` on the Real of each variable in ``units`` (each unit
+    defined in UnitDefinitions with its SI base units, factor and offset), ``start`` on the
+    String of each variable in ``strings``, and the GUID followed by "-" and a digest of the
+    component's name and these changes (the runtime accepts such a GUID)."""
     root = etree.fromstring(md_xml)
     for sv in root.iterfind("ModelVariables/ScalarVariable"):
         if sv.get("name") in units:
             sv.find("Real").set("unit", units[sv.get("name")].name)
+        if sv.get("name") in strings:
+            sv.find("String").set("start", strings[sv.get("name")])
     for var in root.iterfind("ModelVariables/Float64"):  # FMI 3.0: the unit on the variable itself
         if var.get("name") in units:
             var.set("unit", units[var.get("name")].name)
+    for var in root.iterfind("ModelVariables/String"):  # FMI 3.0: <Start value=.../> children
+        if var.get("name") in strings:
+            for old in var.findall("Start"):
+                var.remove(old)
+            etree.SubElement(var, "Start", value=strings[var.get("name")])
+    digest = hashlib.sha256(repr((component, sorted((n, u.name) for n, u in units.items()),
+                                  sorted(strings.items()))).encode()).hexdigest()[:12]
+    token = "guid" if root.get("guid") is not None else "instantiationToken"  # FMI 2.0 / 3.0
+    root.set(token, f"{root.get(token)}-{digest}")
+    if not units:
+        return etree.tostring(root, xml_declaration=True, encoding="UTF-8")
     defs = root.find("UnitDefinitions")
     if defs is None:
         defs = etree.Element("UnitDefinitions")
@@ -214,7 +241,7 @@ def _num(x: float) -> str:
     return repr(float(x))  # shortest text that reads back to the same double
 
 
-def _document(system: System, mds: dict, resources: dict[str, str], files: dict, generic: dict):
+def _document(system: System, mds: dict, resources: dict[str, str], strings: dict, generic: dict):
     nsmap = {"ssd": SSD_NS, "ssc": SSC_NS, "ssv": SSV_NS, "rf": RF_NS, "osp": OSP_NS, "oms": OMS_NS}
     doc = etree.Element(f"{{{SSD_NS}}}SystemStructureDescription", nsmap=nsmap, version="1.0",
                         name=system.name)
@@ -241,8 +268,8 @@ def _document(system: System, mds: dict, resources: dict[str, str], files: dict,
                 _sub(conn, f"ssc:{v.type}", unit=unit if v.type == "Real" and unit else None)
                 if v.type == "Real" and unit:
                     used_units[unit] = where
-        if c.parameters:
-            _parameters(comp, c, {v.name: v for v in md.modelVariables}, files[c.name])
+        if set(c.parameters) - set(strings[c.name]):
+            _parameters(comp, c, {v.name: v for v in md.modelVariables}, strings[c.name])
     if system.connections:
         conns = _sub(sys_el, "ssd:Connections")
         variables = {c.name: {v.name: v for v in mds[c.name].modelVariables} for c in system.components}
@@ -255,7 +282,7 @@ def _document(system: System, mds: dict, resources: dict[str, str], files: dict,
                       endElement=k.dst, endConnector=k.dst_var, suppressUnitConversion=suppress)
             if not k.identity:
                 _sub(el, "ssc:LinearTransformation", factor=_num(k.factor), offset=_num(k.offset))
-    _system_annotations(sys_el, system)
+    _system_annotations(sys_el, system, strings)
     _units(doc, used_units)
     _experiment(doc, system)
     return doc
@@ -281,13 +308,16 @@ def _shown_variables(system: System) -> dict[str, set[str]]:
     return out
 
 
-def _parameters(comp_el, c, variables: dict, files: dict[str, tuple[Path, str]]) -> None:
-    """One inline parameter set with the component's final values (what libcosim reads); a
-    file a String parameter names is written as its name in the FMU's resources/."""
+def _parameters(comp_el, c, variables: dict, strings: dict[str, str]) -> None:
+    """One inline parameter set with the component's final values (what libcosim reads),
+    except its String values (``strings``: the FMU copy's start values, see the module
+    docstring)."""
     binding = _sub(_sub(comp_el, "ssd:ParameterBindings"), "ssd:ParameterBinding")
     pset = _sub(_sub(binding, "ssd:ParameterValues"), "ssv:ParameterSet", version="1.0", name=c.name)
     params = _sub(pset, "ssv:Parameters")
     for name, value in c.parameters.items():
+        if name in strings:
+            continue
         var = variables.get(name)
         p = _sub(params, "ssv:Parameter", name=name)
         t = var.type if var is not None else {bool: "Boolean", int: "Integer", str: "String"}.get(type(value))
@@ -296,7 +326,7 @@ def _parameters(comp_el, c, variables: dict, files: dict[str, tuple[Path, str]])
         elif t in ("Integer", "Enumeration"):
             _sub(p, "ssv:Integer", value=str(int(value)))
         elif t == "String":
-            _sub(p, "ssv:String", value=files[name][1] if name in files else str(value))
+            _sub(p, "ssv:String", value=str(value))
         else:
             _sub(p, "ssv:Real", value=_num(value), unit=var.unit if var is not None and var.unit else None)
 
@@ -327,13 +357,20 @@ def _experiment(doc, system: System) -> None:
     _sub(_sub(a, "osp:Algorithm"), "osp:FixedStepAlgorithm", baseStepSize=_num(system.step_size))
 
 
-def _system_annotations(sys_el, system: System) -> None:
+def _system_annotations(sys_el, system: System, strings: dict[str, dict[str, str]]) -> None:
     annotations = _sub(sys_el, "ssd:Annotations")
     # OMSimulator 3.0 (SystemWC) reads only the first annotation of a system, and without its
     # own it has no step size: its fixed-step master comes first, ours are ignorable after it
     oms = _sub(_sub(_sub(annotations, "ssc:Annotation", type="org.openmodelica"), "oms:Annotations"),
                "oms:SimulationInformation")
     _sub(oms, "oms:FixedStepMaster", description="oms-ma", stepSize=_num(system.step_size))
+    if any(strings.values()):  # String values for railfmu's reader (the FMU copies carry them for the rest)
+        pset = _sub(_sub(annotations, "ssc:Annotation", type="org.railfmu.strings"), "ssv:ParameterSet",
+                    version="1.0", name="strings")
+        params = _sub(pset, "ssv:Parameters")
+        for comp, values in strings.items():
+            for name, value in values.items():
+                _sub(_sub(params, "ssv:Parameter", name=f"{comp}.{name}"), "ssv:String", value=value)
     if system.observers:
         observers = _sub(_sub(annotations, "ssc:Annotation", type="org.railfmu.observers"), "rf:Observers")
         for o in system.observers:

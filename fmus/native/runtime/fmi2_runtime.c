@@ -87,6 +87,10 @@ typedef struct {
                                         generic message is added only if the model said nothing */
     int terminateRequested;          /* the model called model_terminate (part of the FMU state) */
     double terminateTime;            /* ... and reached this time */
+#if N_STRING > 0
+    char *stringStart[N_STRING];     /* start values from the unpacked modelDescription.xml
+                                        (NULL: the compiled one); see md_string_starts */
+#endif
 } Instance;
 
 /* A saved FMU state (fmi2GetFMUstate). Everything a continuation depends on: modelData is
@@ -377,6 +381,167 @@ char *model_resolve_path(ModelInstance *m, const char *path) {
     return out;
 }
 
+/* ---- String start values of a per-instance copy -------------------------------------
+   `railfmu export` gives a component with String parameters (a table's file, now in the
+   copy's resources/, and its column names) its own copy of the FMU whose
+   modelDescription.xml has them as start values, for importers that set no String
+   parameter (OMSimulator 3.0 reads no ssv:String). The binary is the same, so it takes
+   its String start values from the modelDescription.xml of the unpacked FMU, beside
+   resources/ (what the compiled defaults are when nothing is found). Such a copy's GUID is
+   this binary's followed by "-" and a suffix: importers that unpack an FMU once per GUID
+   (libcosim) keep the copies apart. */
+
+static int guid_matches(const char *guid) {
+    size_t n = strlen(MODEL_GUID);
+    return guid && strncmp(guid, MODEL_GUID, n) == 0 && (guid[n] == '\0' || (guid[n] == '-' && guid[n + 1]));
+}
+
+#if N_STRING > 0
+static const char *skip_space(const char *p, const char *end) {
+    while (p < end && (*p == ' ' || *p == '\t' || *p == '\r' || *p == '\n')) p++;
+    return p;
+}
+
+/* the end ('>') of the tag starting at p, quotes respected; NULL if none */
+static const char *tag_end(const char *p) {
+    char q = 0;
+    for (; *p; p++) {
+        if (q) {
+            if (*p == q) q = 0;
+        } else if (*p == '"' || *p == '\'') {
+            q = *p;
+        } else if (*p == '>') {
+            return p;
+        }
+    }
+    return NULL;
+}
+
+/* [p, end) with the XML entities decoded (malloc'ed) */
+static char *xml_text(const char *p, const char *end) {
+    char *out = (char *)malloc((size_t)(end - p) + 1), *o = out;
+    if (!out) return NULL;
+    while (p < end) {
+        static const char *const names[] = {"&lt;", "&gt;", "&amp;", "&quot;", "&apos;"};
+        static const char chars[] = "<>&\"'";
+        size_t k, done = 0;
+        for (k = 0; k < 5 && !done; k++) {
+            size_t n = strlen(names[k]);
+            if ((size_t)(end - p) >= n && strncmp(p, names[k], n) == 0) {
+                *o++ = chars[k];
+                p += n;
+                done = 1;
+            }
+        }
+        if (!done && p[0] == '&' && p + 2 < end && p[1] == '#') {
+            char *stop;
+            unsigned long c = p[2] == 'x' ? strtoul(p + 3, &stop, 16) : strtoul(p + 2, &stop, 10);
+            if (stop < end && *stop == ';' && c > 0 && c <= 0x10FFFF) { /* as UTF-8 */
+                if (c < 0x80) {
+                    *o++ = (char)c;
+                } else if (c < 0x800) {
+                    *o++ = (char)(0xC0 | (c >> 6)), *o++ = (char)(0x80 | (c & 0x3F));
+                } else if (c < 0x10000) {
+                    *o++ = (char)(0xE0 | (c >> 12)), *o++ = (char)(0x80 | ((c >> 6) & 0x3F));
+                    *o++ = (char)(0x80 | (c & 0x3F));
+                } else {
+                    *o++ = (char)(0xF0 | (c >> 18)), *o++ = (char)(0x80 | ((c >> 12) & 0x3F));
+                    *o++ = (char)(0x80 | ((c >> 6) & 0x3F)), *o++ = (char)(0x80 | (c & 0x3F));
+                }
+                p = stop + 1;
+                done = 1;
+            }
+        }
+        if (!done) *o++ = *p++;
+    }
+    *o = '\0';
+    return out;
+}
+
+/* the decoded value of attribute `name` of the tag [p, end) (p at '<'), or NULL */
+static char *xml_attribute(const char *p, const char *end, const char *name) {
+    while (p < end && *p != ' ' && *p != '\t' && *p != '\r' && *p != '\n') p++; /* the tag's name */
+    for (;;) {
+        const char *a = skip_space(p, end), *a_end, *v;
+        char q;
+        for (p = a; p < end && *p != '=' && *p != ' ' && *p != '>' && *p != '/'; p++) {}
+        a_end = p;
+        if (a_end == a) return NULL;
+        v = skip_space(p, end);
+        if (v >= end || *v != '=') return NULL;
+        v = skip_space(v + 1, end);
+        if (v >= end || (*v != '"' && *v != '\'')) return NULL;
+        q = *v++;
+        for (p = v; p < end && *p != q; p++) {}
+        if (p >= end) return NULL;
+        if ((size_t)(a_end - a) == strlen(name) && strncmp(a, name, (size_t)(a_end - a)) == 0)
+            return xml_text(v, p);
+        p++;
+    }
+}
+
+static char *read_text_file(const char *path) {
+    FILE *f = fopen(path, "rb");
+    char *buf = NULL;
+    long size;
+    if (!f) return NULL;
+    if (fseek(f, 0, SEEK_END) == 0 && (size = ftell(f)) >= 0 && fseek(f, 0, SEEK_SET) == 0 &&
+        (buf = (char *)malloc((size_t)size + 1)) != NULL) {
+        if (fread(buf, 1, (size_t)size, f) != (size_t)size) {
+            free(buf);
+            buf = NULL;
+        } else {
+            buf[size] = '\0';
+        }
+    }
+    fclose(f);
+    return buf;
+}
+
+/* inst->stringStart from <resources>/../modelDescription.xml (left NULL where not found) */
+static void md_string_starts(Instance *inst) {
+    static const char md_name[] = "/../modelDescription.xml";
+    char *dir, *path, *text;
+    const char *p;
+    size_t nd;
+    if (!inst->m.resourceLocation || !(dir = resource_dir(inst->m.resourceLocation))) return;
+    nd = strlen(dir);
+    while (nd > 0 && (dir[nd - 1] == '/' || dir[nd - 1] == '\\')) nd--;
+    path = (char *)malloc(nd + sizeof md_name);
+    if (path) {
+        memcpy(path, dir, nd);
+        memcpy(path + nd, md_name, sizeof md_name);
+    }
+    free(dir);
+    text = path ? read_text_file(path) : NULL;
+    free(path);
+    if (!text) return;
+    for (p = strstr(text, "<ScalarVariable"); p; p = strstr(p, "<ScalarVariable")) {
+        const char *end = tag_end(p), *body, *s;
+        char *name;
+        size_t k;
+        if (!end) break;
+        body = strstr(end, "</ScalarVariable");
+        if (end[-1] == '/' || !body) { /* no type element */
+            p = end;
+            continue;
+        }
+        s = strstr(end, "<String");
+        name = xml_attribute(p, end, "name");
+        if (name && s && s < body && (s[7] == ' ' || s[7] == '/' || s[7] == '>' || s[7] == '\n')) {
+            const char *s_end = tag_end(s);
+            for (k = 0; k < N_STRING && s_end; k++) {
+                if (strcmp(model_string_info[k].name, name) == 0 && !inst->stringStart[k])
+                    inst->stringStart[k] = xml_attribute(s, s_end, "start");
+            }
+        }
+        free(name);
+        p = body;
+    }
+    free(text);
+}
+#endif
+
 /* ---- state machine ------------------------------------------------------------------ */
 
 /* Allowed states per function: FMI 2.0.4, section 4.2.4, state table of the slave. */
@@ -446,6 +611,14 @@ static void free_strings(ModelInstance *m) {
 #endif
 }
 
+static void free_string_starts(Instance *inst) {
+#if N_STRING > 0
+    free_string_array(inst->stringStart);
+#else
+    (void)inst;
+#endif
+}
+
 static int set_start_values(ModelInstance *m) {
     memcpy(m->r, model_real_start, sizeof m->r);
     m->r[0] = 0.0; /* time */
@@ -460,7 +633,8 @@ static int set_start_values(ModelInstance *m) {
         size_t k;
         free_strings(m);
         for (k = 0; k < N_STRING; k++) {
-            m->s[k] = dup_string(model_string_start[k]);
+            const char *start = ((Instance *)m)->stringStart[k];
+            m->s[k] = dup_string(start ? start : model_string_start[k]);
             if (!m->s[k]) return 0;
         }
     }
@@ -540,7 +714,7 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
                   MODEL_NAME, (int)fmuType);
         return NULL;
     }
-    if (!fmuGUID || strcmp(fmuGUID, MODEL_GUID) != 0) {
+    if (!guid_matches(fmuGUID)) {
         log_early(instanceName, functions,
                   "fmi2Instantiate: GUID \"%s\" does not match this binary's \"%s\" "
                   "(modelDescription.xml and binary from different builds?)",
@@ -562,10 +736,14 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
     m->loggingOn = loggingOn ? fmi2True : fmi2False;
     m->modelData = NULL;
     m->state = STATE_INSTANTIATED;
+#if N_STRING > 0
+    md_string_starts(inst);
+#endif
     if (!m->instanceName || (fmuResourceLocation && !m->resourceLocation) ||
         !set_start_values(m)) {
         log_early(instanceName, functions, "fmi2Instantiate: out of memory");
         free_strings(m);
+        free_string_starts(inst);
         free(m->instanceName);
         free(m->resourceLocation);
         free(inst);
@@ -579,6 +757,7 @@ void fmi2FreeInstance(fmi2Component c) {
     if (!inst) return;
     release_model_data(&inst->m);
     free_strings(&inst->m);
+    free_string_starts(inst);
     free(inst->m.instanceName);
     free(inst->m.resourceLocation);
     free(inst);
