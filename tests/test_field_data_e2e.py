@@ -235,7 +235,7 @@ def test_a_study_on_its_example_and_on_a_simulated_run_from_outside_the_reposito
     simulated run's estimates within :data:`TOLERANCE`; its figures read like the data."""
     base, runs = outside
     _ran(runs, study)
-    CHECKS[study](base / study, False)
+    print(f"{study}: {CHECKS[study](base / study, False)}")  # the measured differences (pytest -s)
     for run in ("shipped", "replay"):
         _check_figures(base / study / run, study)
     heading = runs[study]["replay"].stdout + runs[study]["replay"].stderr
@@ -248,7 +248,7 @@ def test_the_whole_examples_and_longer_simulated_runs(installed, tmp_path_factor
     base, runs = _outside(installed, tmp_path_factory, slow=True)
     for study in STUDIES:
         _ran(runs, study)
-        CHECKS[study](base / study, True)
+        print(f"{study}: {CHECKS[study](base / study, True)}")
         for run in ("shipped", "replay"):
             _check_figures(base / study / run, study)
 
