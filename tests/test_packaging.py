@@ -1,19 +1,15 @@
 """railfmu installed as a user installs it: one package in site-packages, its data included, and
 no clash with a user's own ``models.py`` beside the script.
 
-The wheel is built once per session (``python -m build``) and installed without dependencies
-into a fresh venv that borrows this environment's dependencies through a ``.pth`` line (a path
-added that way is not a site directory, so this environment's editable railfmu stays out)."""
+The wheel is built once per session and installed into a fresh venv (the ``installed`` fixture
+of conftest.py)."""
 
 from __future__ import annotations
 
 import json
-import os
 import re
-import site
 import subprocess
 import sys
-import sysconfig
 import tomllib
 from pathlib import Path
 
@@ -33,29 +29,6 @@ def test_the_package_list_is_every_folder_with_an_init():
         if "__pycache__" not in p.parts and p.parent != ROOT / "experiments" / "api"}
     assert set(config["packages"]) == on_disk
     assert config["package-dir"]["railfmu"] == "experiments/api"
-
-
-@pytest.fixture(scope="session")
-def installed(tmp_path_factory):
-    """A fresh venv holding only the railfmu wheel; its python."""
-    tmp = tmp_path_factory.mktemp("install")
-    res = subprocess.run([sys.executable, "-m", "build", "--wheel", "--outdir", str(tmp / "dist"), str(ROOT)],
-                         capture_output=True, text=True)
-    assert res.returncode == 0, res.stderr[-2000:]
-    wheel, = (tmp / "dist").glob("railfmu-*.whl")
-    venv = tmp / "venv"
-    subprocess.run([sys.executable, "-m", "venv", "--without-pip", str(venv)], check=True)
-    python = venv / "bin" / "python"
-    purelib = Path(subprocess.run([str(python), "-c", "import sysconfig; print(sysconfig.get_paths()['purelib'])"],
-                                  capture_output=True, text=True, check=True).stdout.strip())
-    before = set(os.listdir(purelib))
-    res = subprocess.run([sys.executable, "-m", "pip", "--python", str(python), "install", "--quiet",
-                          "--no-deps", "--no-index", str(wheel)], capture_output=True, text=True)
-    assert res.returncode == 0, res.stderr[-2000:]
-    added = set(os.listdir(purelib)) - before
-    (Path(purelib) / "_railfmu_test_deps.pth").write_text(
-        "\n".join([sysconfig.get_paths()["purelib"], *site.getsitepackages()]) + "\n")
-    return python, added
 
 
 def test_an_install_puts_one_package_into_site_packages(installed):

@@ -11,22 +11,28 @@ is, the default) and ``conicity_minus10`` (the observers' conicity 10 % low, MuÃ
 Table 3).
 """
 
-from railfmu.experiments.engine.study_protocol import Study
+from railfmu.experiments.engine.study_protocol import Study, setting
 
-PLOTS = {  # file -> (title, one list of (signal, label) per axis)
+# file -> (title, one list of (signal, quantity) per axis); the plots add the file's column
+# names and the connectors' units
+PLOTS = {
     "sensors.png": ("Replayed sensor signals",
-                    [[("replay.y_1", "wheelset lateral acc. ddy [m/s2]")],
-                     [("replay.y_2", "wheelset yaw rate dpsi [rad/s]")],
-                     [("replay.y_3", "frame lateral acc. ddy_f [m/s2]")],
-                     [("replay.y_4", "measured alignment [m]")]]),
+                    [[("replay.y_1", "wheelset lateral acceleration")],
+                     [("replay.y_2", "wheelset yaw rate")],
+                     [("replay.y_3", "frame lateral acceleration")],
+                     [("replay.y_4", "measured lateral alignment [mm]")]]),
 }
 
 
 class AlignmentReplay(Study):
     """The alignment observers on a replayed measured run; the study table is the default one
-    (each observer's raw error against the measured alignment, per variant)."""
+    (each observer's raw error against the measured alignment, per variant). Figures along the
+    track: the distance is the run's speed (run.V) times the time."""
     default_variant = "measured"
+    roles = {"speed": setting("alignment", "V")}
     figures_of_signals = PLOTS
+    x_axis = "speed"
+    quantities = {"xi": "lateral alignment [mm]"}
 
 
 STUDY = AlignmentReplay(__doc__.strip().splitlines()[0])

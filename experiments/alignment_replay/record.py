@@ -1,19 +1,20 @@
 """Write the measured table this experiment replays: a run of ``track_wheelset`` as an axle-box
 logger would record it.
 
-    python -m railfmu.experiments.alignment_replay.record [SECONDS]
+    python -m railfmu.experiments.alignment_replay.record [SECONDS] [--from RUN] [--to FILE]
 
 runs ``railfmu run track_wheelset --stop-time SECONDS`` (default 3 s of the ``psd`` variant:
-ERRI B176 low-level alignment at 20 m/s, 1 kHz) and keeps ``time,ddy,dpsi,ddy_f,alignment``
-of its ``signals.csv`` in ``resources/axlebox_run.csv``. The cells are copied as text:
+ERRI B176 low-level alignment at 20 m/s, 1 kHz), or takes the output folder ``RUN`` of a run
+you made, and keeps ``time,ddy,dpsi,ddy_f,alignment`` of its ``signals.csv`` in ``FILE``
+(default ``resources/axlebox_run.csv``). The cells are copied as text:
 ``signals.csv`` holds ``repr`` floats, which read back to the same doubles, so the replay
 feeds the observer exactly the samples the simulated run fed it.
 """
 
 from __future__ import annotations
 
+import argparse
 import csv
-import sys
 import tempfile
 from pathlib import Path
 
@@ -46,6 +47,17 @@ def record(seconds: float = 3.0, out: Path = TABLE) -> Path:
         return table_from_signals(Path(tmp) / "signals.csv", out)
 
 
-if __name__ == "__main__":
-    path = record(float(sys.argv[1]) if len(sys.argv) > 1 else 3.0)
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("seconds", nargs="?", type=float, default=3.0)
+    ap.add_argument("--from", dest="run", type=Path, default=None, help="a track_wheelset output folder")
+    ap.add_argument("--to", type=Path, default=TABLE)
+    args = ap.parse_args(argv)
+    path = (table_from_signals(args.run / "signals.csv", args.to) if args.run is not None
+            else record(args.seconds, args.to))
     print(f"wrote {path} ({path.stat().st_size / 1e3:.0f} kB)")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

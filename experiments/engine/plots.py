@@ -1,5 +1,11 @@
-"""PNG figures of a run, in one place: the figure boilerplate (:func:`figure`), the study's
-signal figures and each observer's estimates over their truth.
+"""PNG figures of a run, in one place: the figure boilerplate (:func:`figure`, :func:`save`), the
+study's signal figures and each observer's estimates over their truth.
+
+Axes read like the data: a replayed channel is named by its file's column (:func:`columns_of`)
+and carries its SSD connector's unit (:func:`units_of`), every y-axis names its quantity beside
+its unit, legends sit outside the data, and a study along the track has the distance on x.
+Every PNG carries its axis labels in a text chunk (:func:`figure_labels` reads them back), so
+a test or a user's script checks what a figure says without looking at it.
 
 Only the runner imports this module, and only when a run writes figures: a Monte Carlo
 member does not load matplotlib.
@@ -7,12 +13,20 @@ member does not load matplotlib.
 
 from __future__ import annotations
 
+import json
+import math
 from pathlib import Path
 
 import numpy as np
 
 # one curve: (label, values, unit) or (label, values, unit, matplotlib line style kwargs)
 Curve = tuple
+#: PNG text key holding the figure's axis labels (JSON)
+LABELS_KEY = "railfmu:axes"
+#: display units a label may ask for with ``[unit]``: (unit of the values, display unit) -> factor
+DISPLAY = {("m", "mm"): 1e3, ("m/s", "mm/s"): 1e3, ("m/s", "km/h"): 3.6, ("rad", "deg"): 180 / math.pi,
+           ("rad/s", "deg/s"): 180 / math.pi, ("N/m", "kN/m"): 1e-3}
+NO_UNIT = ("-", "?", "", None)
 
 
 def _pyplot():
@@ -26,82 +40,203 @@ def _pyplot():
 
 def units_of(system) -> dict[str, str]:
     """``{"component.variable": unit}`` of every variable of the system's FMUs (for axis
-    labels), from the model descriptions the system already holds: deriving the models would
-    take seconds."""
+    labels): the FMU's unit, else the SSD connector's (a generic channel, e.g. a replayed
+    column), else "-". From the model descriptions the system already holds: deriving the
+    models would take seconds."""
     units = {}
     for c in system.components:
         for v in c.variables.values():
             unit = v.unit or (v.declaredType.unit if v.declaredType is not None else None)
+            if not unit and v.name in c.units:
+                unit = c.units[v.name].name
             units[f"{c.name}.{v.name}"] = unit or "-"
     return units
 
 
-def x_axis(signals: dict[str, np.ndarray], position: str | None = None) -> tuple[np.ndarray, str]:
-    """The x-axis of a run's figures: time, or the distance along the track when ``position``
-    names the recorded signal that holds it."""
+def columns_of(system) -> dict[str, str]:
+    """``{"component.y_k": column}``: the file column each channel of a table player
+    (``column_k``, ``boolean_column_k``, ``integer_column_k`` parameters) plays, as the file's
+    header names it."""
+    out = {}
+    for c in system.components:
+        for prefix, channel in (("column_", "y_"), ("boolean_column_", "boolean_"), ("integer_column_", "integer_")):
+            for name, v in c.variables.items():
+                if name.startswith(prefix) and name[len(prefix):].isdigit():
+                    col = c.parameters.get(name, v.start)
+                    if col:
+                        out[f"{c.name}.{channel}{name[len(prefix):]}"] = str(col)
+    return out
+
+
+def split_label(label: str) -> tuple[str, str | None]:
+    """``"lateral alignment [mm]"`` -> ("lateral alignment", "mm"); no brackets: (label, None)."""
+    if label.endswith("]") and " [" in label:
+        name, unit = label[:-1].rsplit(" [", 1)
+        return name, unit
+    return label, None
+
+
+def in_display_unit(values, unit: str, display: str | None) -> tuple[np.ndarray, str]:
+    """Values in the display unit a label asks for (:data:`DISPLAY`), else as they are."""
+    factor = DISPLAY.get((unit, display))
+    if factor is None:
+        return np.asarray(values), unit
+    return factor * np.asarray(values, dtype=float), display
+
+
+def unit_text(unit: str | None) -> str:
+    return "(unit not given)" if unit in NO_UNIT else f"[{unit}]"
+
+
+def x_axis(signals: dict[str, np.ndarray], position=None) -> tuple[np.ndarray, str]:
+    """The x-axis of a run's figures: time; the distance along the track when ``position``
+    names the recorded signal that holds it; or, when ``position`` is a number (the run's
+    constant speed, m/s), that speed times the time."""
+    t = np.asarray(signals["time"])
     if position is None:
-        return np.asarray(signals["time"]), "time [s]"
-    return np.asarray(signals[position]), "track position [m]"
+        return t, "time [s]"
+    if isinstance(position, (int, float)):
+        return float(position) * t, f"distance along the track [m] (at {float(position):g} m/s)"
+    return np.asarray(signals[position]), "distance along the track [m]"
+
+
+def _common_words(labels: list[str]) -> str:
+    words = [s.split() for s in labels]
+    common = []
+    for group in zip(*words):
+        if any(w != group[0] for w in group):
+            break
+        common.append(group[0])
+    return " ".join(common).rstrip(",:")
+
+
+def _overlaps(a, b) -> bool:
+    return a.x0 < b.x1 and b.x0 < a.x1 and a.y0 < b.y1 and b.y0 < a.y1
+
+
+def save(fig, path: Path) -> None:
+    """Write ``fig`` as a PNG whose text chunk :data:`LABELS_KEY` holds, per axis, its title, x
+    and y labels, legend entries and whether the legend covers the axis (see
+    :func:`figure_labels`)."""
+    fig.canvas.draw()
+    axes = []
+    for ax in fig.axes:
+        leg = ax.get_legend()
+        axes.append({"title": ax.get_title(), "x": ax.get_xlabel(), "y": ax.get_ylabel(),
+                     "legend": [t.get_text() for t in leg.get_texts()] if leg else [],
+                     "legend_over_data": bool(leg and _overlaps(leg.get_window_extent(), ax.get_window_extent()))})
+    fig.savefig(path, dpi=110, bbox_inches="tight", metadata={LABELS_KEY: json.dumps(axes)})
+
+
+def figure_labels(png: Path | str) -> list[dict]:
+    """The axis labels :func:`save` wrote into a PNG: one dict per axis (``title``, ``x``,
+    ``y``, ``legend``, ``legend_over_data``); [] for a PNG written otherwise."""
+    from PIL import Image
+
+    with Image.open(png) as im:
+        text = im.text.get(LABELS_KEY)
+    return json.loads(text) if text else []
+
+
+def legend_outside(ax, columns: int = 1) -> None:
+    """The axis's legend to the right of it, off the data."""
+    ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0, ncol=columns)
 
 
 def figure(out: Path, fname: str, title: str, x: np.ndarray, x_label: str, axes: list[list[Curve]],
-           height: float = 2.4, width: float = 9.0, legend_columns: int = 1) -> str:
-    """One PNG, one axis per list of curves sharing x; returns the file name. An axis of one
-    curve is labelled with it; an axis of several gets a legend and its unit."""
+           height: float = 2.4, width: float = 9.0, legend_columns: int = 1,
+           quantities: list[str | None] | None = None) -> str:
+    """One PNG, one axis per list of curves sharing x; returns the file name. Every y-axis says
+    ``quantity [unit]``: ``quantities[i]`` for axis i, else its one curve's label, else the
+    words its curves' labels share (else all of them); an axis of several curves gets a legend
+    outside the data."""
     plt = _pyplot()
     fig, ax_grid = plt.subplots(len(axes), 1, figsize=(width, max(3.6, height * len(axes))), sharex=True,
                                 squeeze=False)
-    for ax, curves in zip(ax_grid[:, 0], axes):
+    for i, (ax, curves) in enumerate(zip(ax_grid[:, 0], axes)):
         for label, values, _, *style in curves:
             n = min(len(x), len(values))  # estimates may stop short of the signals
             ax.plot(x[:n], np.asarray(values)[:n], label=label, **({"lw": 0.8} | (style[0] if style else {})))
+        labels = [c[0] for c in curves]
+        quantity = (quantities[i] if quantities and quantities[i] else None) or (
+            labels[0] if len(labels) == 1 else _common_words(labels) or " / ".join(labels))
+        # a sensor channel may be unitless ("-") where the physical signal beside it is not
+        unit = next((c[2] for c in curves if c[2] not in NO_UNIT), curves[0][2])
+        ax.set_ylabel(f"{quantity} {unit_text(unit)}", fontsize=8)
         if len(curves) > 1:
-            ax.legend(fontsize=8, loc="upper right", ncol=legend_columns)
-            # a sensor channel may be unitless ("-") where the physical signal beside it is not
-            ax.set_ylabel(f"[{next((c[2] for c in curves if c[2] not in ('-', '?')), curves[0][2])}]", fontsize=8)
-        else:
-            ax.set_ylabel(f"{curves[0][0]} [{curves[0][2]}]", fontsize=8)
+            legend_outside(ax, legend_columns)
         ax.grid(alpha=0.3)
     ax_grid[0, 0].set_title(title)
     ax_grid[-1, 0].set_xlabel(x_label)
     fig.tight_layout()
-    fig.savefig(out / fname, dpi=110)
+    save(fig, out / fname)
     plt.close(fig)
     return fname
 
 
 def plot_signals(spec: dict | None, signals: dict[str, np.ndarray], roles: dict, units: dict[str, str], out: Path,
-                 position: str | None = None) -> list[str]:
-    """The study's signal figures (``{file: (title, [[(signal or role, label), ...] per axis])}``);
-    without them, every recorded signal on its own axis (at most 8)."""
+                 position=None, columns: dict[str, str] | None = None) -> list[str]:
+    """The study's signal figures (``{file: (title, [[(signal or role, label), ...] per axis])}``;
+    a label may end in a display unit, ``"measured alignment [mm]"``); without them, every
+    recorded signal on its own axis (at most 8). A replayed channel's label names its file
+    column."""
+    columns = columns or {}
     if spec is None:
         names = [k for k in signals if k != "time"][:8]
-        spec = {"signals.png": ("Recorded signals", [[(n, n)] for n in names])} if names else {}
+        spec = {"signals.png": ("Recorded signals", [[(n, columns.get(n, n))] for n in names])} if names else {}
     x, x_label = x_axis(signals, position)
     files = []
     for fname, (title, axes) in spec.items():
-        axes_spec = [[(label, signals[sig], units.get(sig, "?")) for sig, label in
-                      ((roles.get(s, s), label) for s, label in curves) if sig in signals] for curves in axes]
-        axes_spec = [a for a in axes_spec if a]
+        axes_spec = []
+        for curves in axes:
+            axis = []
+            for s, label in curves:
+                sig = roles.get(s, s)
+                if sig not in signals:
+                    continue
+                name, display = split_label(label)
+                values, unit = in_display_unit(signals[sig], units.get(sig, "?"), display)
+                col = columns.get(sig)
+                axis.append((f"{name} ({col})" if col and col not in name else name, values, unit))
+            if axis:
+                axes_spec.append(axis)
         if axes_spec:
             files.append(figure(out, fname, title, x, x_label, axes_spec))
     return files
 
 
-def plot_estimates(bank, signals: dict[str, np.ndarray], units: dict[str, str], out: Path) -> list[str]:
-    """One figure per observer: every estimate that has a truth signal, estimate over truth."""
+def plot_estimates(bank, signals: dict[str, np.ndarray], units: dict[str, str], out: Path, position=None,
+                   columns: dict[str, str] | None = None, quantities: dict[str, str] | None = None) -> list[str]:
+    """One figure per observer: every estimate that has a truth signal, estimate over truth
+    (converted to the estimate's unit, as the scores are). ``quantities`` names an estimate
+    (``"xi": "lateral alignment [mm]"``, optionally with a display unit); else the truth's file
+    column or the estimate's name does."""
+    columns, quantities = columns or {}, quantities or {}
     t, est = bank.arrays()
+    if position is None:
+        x, x_label = t, "time [s]"
+    else:  # the distance at the estimates' times
+        xs, x_label = x_axis(signals, position)
+        x = np.interp(t, np.asarray(signals["time"]), xs)
     files, col = [], 0
-    for spec, obs in zip(bank.specs, bank.observers):
-        axes = []
+    for feed in bank.online:
+        spec, obs = feed.spec, feed.obs
+        axes, names = [], []
         for j, name in enumerate(obs.outputs):
             if name in spec.truth:
                 truth_sig = spec.truth[name]
-                unit = obs.units.get(name, units.get(truth_sig, "?"))
-                axes.append([(f"truth {truth_sig}", signals[truth_sig][:len(t)], unit),
-                             (f"estimate {spec.name}.{name}", est[:, col + j], unit)])
+                unit = obs.units.get(name) or units.get(truth_sig, "?")
+                a, b = feed.truth_map.get(name, (1.0, 0.0))
+                truth = a * np.asarray(signals[truth_sig][:len(t)], dtype=float) + b
+                quantity, display = split_label(quantities.get(name) or columns.get(truth_sig) or name)
+                truth, shown = in_display_unit(truth, unit, display)
+                estimate, _ = in_display_unit(est[:, col + j], unit, display)
+                col_name = columns.get(truth_sig)
+                axes.append([(f"truth ({col_name})" if col_name else "truth", truth, shown),
+                             (f"{spec.name} estimate", estimate, shown)])
+                names.append(quantity)
         col += len(obs.outputs)
         if axes:
             files.append(figure(out, f"estimates_{spec.name}.png", f"Observer {spec.name}: estimates and truth",
-                                t, "time [s]", axes))
+                                x, x_label, axes, quantities=names))
     return files

@@ -161,13 +161,15 @@ class Run:
         data = RunData(rd.signals, rd.estimates, base, rd.roles, rd.observers)
         files = exp.study.files(data, out)
 
-        from railfmu.experiments.engine.plots import plot_estimates, plot_signals, units_of
+        from railfmu.experiments.engine.plots import columns_of, plot_estimates, plot_signals, units_of
 
         roles = rd.roles
         position = roles.get(exp.study.x_axis) if exp.study.x_axis != "time" else None
-        units = units_of(system)
-        self._plots = (plot_signals(exp.study.figures_of_signals, rd.signals, roles, units, out, position)
-                       + plot_estimates(bank, rd.signals, units, out)
+        if position is not None and position not in rd.signals:  # a speed setting: distance = V t
+            position = float(position)
+        units, columns = units_of(system), columns_of(system)
+        self._plots = (plot_signals(exp.study.figures_of_signals, rd.signals, roles, units, out, position, columns)
+                       + plot_estimates(bank, rd.signals, units, out, position, columns, exp.study.quantities)
                        + exp.study.figures(RunData(rd.signals, rd.estimates, base, roles, rd.observers), out))
         write_atomic(out / "report.md", self.report())
         offline = [f"estimates_{name}.{fmt}" for name in bank.results]

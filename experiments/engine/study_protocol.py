@@ -128,8 +128,12 @@ class Study:
     #: the study's signal figures, ``{file: (title, [[(role or signal, label), ...] per axis])}``;
     #: None plots every recorded signal (at most 8)
     figures_of_signals: dict | None = None
-    #: x-axis of those figures: "time" or a role / signal giving the distance along the track
+    #: x-axis of those figures and of the estimates': "time", or a role / signal giving the distance
+    #: along the track, or a role bound to the run's constant speed (m/s; the distance is speed x time)
     x_axis: str = "time"
+    #: estimate name -> the quantity its figure's y-axis names, optionally with a display unit
+    #: (``{"xi": "lateral alignment [mm]"}``); default: the truth's file column or the estimate's name
+    quantities: dict[str, str] = {}
     #: the study's plausibility checks of each replay's file (``railfmu.experiments.engine.replay``):
     #: ``check(replay_file, system) -> [warning, ...]``, raising a UserError for a file that is wrong;
     #: run after the engine's own (separator, times, positions against speeds)

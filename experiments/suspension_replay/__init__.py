@@ -11,7 +11,7 @@ truth is read. Shipped: a simulated ``suspension_fault --variant step_fault --se
 
 Outputs: ``k1.csv`` (``time_s``, ``paper_wls_k1_N_m``, ``improved_k1_N_m``), ``k1_estimates.png``
 (both over time, the alarm level and the detection times), ``rails.png`` (the rail heights
-under the bogies over time). Metrics per estimator: ``k1_final_N_m`` (the mean over the last
+under the bogies along the track). Metrics per estimator: ``k1_final_N_m`` (the mean over the last
 :data:`FINAL_SPAN` s), ``k1_baseline_N_m`` (the median over :data:`BASELINE` s), and
 ``detection_time_s``: the first time the estimate stays below ``(1 - ALARM_DROP)`` times the
 baseline for :data:`HOLD` s, at the end of that hold (None: no alarm).
@@ -91,13 +91,14 @@ class SuspensionReplay(Study):
                 marks.append(f"{n} {m['detection_time_s']:.2f} s")
         title = "k1 on the replayed run (Fig. 3 of Onat et al. (2016))" + (
             f"; detected: {', '.join(marks)}" if marks else "; no detection")
-        files = [figure(out, "k1_estimates.png", title, t, "time [s]", [curves])]
+        files = [figure(out, "k1_estimates.png", title, t, "time [s]", [curves],
+                        quantities=["secondary suspension stiffness k1"])]
         s = run.signals
-        ts = np.asarray(s["time"])
         files.append(figure(out, "rails.png", "Rail heights under the bogies (from the geometry file by position)",
-                            ts, "time [s]",
-                            [[(f"{side} rail, bogie {i}", 1e3 * np.asarray(s[f"track.vertical_{side}_{i}"]), "mm")
-                              for side in ("left", "right")] for i in (1, 2)]))
+                            np.asarray(s["track.position"]), "distance along the track [m] (bogie 1)",
+                            [[(f"{side} rail", 1e3 * np.asarray(s[f"track.vertical_{side}_{i}"]), "mm")
+                              for side in ("left", "right")] for i in (1, 2)],
+                            quantities=[f"rail height, bogie {i}" for i in (1, 2)]))
         return files
 
     def report_md(self, metrics: dict) -> str:

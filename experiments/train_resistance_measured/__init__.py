@@ -39,7 +39,9 @@ from railfmu.models.errors import UserError
 REFERENCE = "ukf_paper"
 ROLES = {"position": measurement(REFERENCE, "position"), "speed": measurement(REFERENCE, "speed"),
          "file": parameter("replay", "file")}
-PLOTS = {"measured.png": ("The replayed run", [[("position", "position [m]")], [("speed", "speed [km/h]")]])}
+PLOTS = {"measured.png": ("The replayed run", [[("position", "position along the line")], [("speed", "speed")]])}
+#: the Davis coefficients' names on the figure's axes (their units are the estimators')
+DAVIS = ("r0, constant resistance", "r1, resistance per speed", "r2, resistance per speed squared")
 
 
 def features_of(t: np.ndarray, est: dict, name: str, recogniser_name: str = "paper") -> dict:
@@ -165,9 +167,12 @@ class TrainResistanceMeasured(Study):
 
         est = run.estimates
         t = np.asarray(est["time"])
-        axes = [[(f"{n} r{k}", est[f"{n}.r{k}"], "SI") for n in estimators_of(est)] for k in range(3)]
+        units = {**{f"r{k}": u for k, u in enumerate(("N/kg", "N.s/(m.kg)", "N.s2/(m2.kg)"))},
+                 **{k: u for o in run.observers.values() for k, u in getattr(o, "units", {}).items()}}
+        axes = [([(n, est[f"{n}.r{k}"], units[f"r{k}"]) for n in estimators_of(est)], DAVIS[k]) for k in range(3)]
+        axes = [a for a in axes if a[0]]
         return [figure(out, "resistance_estimates.png", "Running-resistance estimates on the replayed run",
-                       t, "time [s]", [a for a in axes if a])] if any(axes) else []
+                       t, "time [s]", [a for a, _ in axes], quantities=[q for _, q in axes])] if axes else []
 
 
 STUDY = TrainResistanceMeasured(__doc__.strip().splitlines()[0])

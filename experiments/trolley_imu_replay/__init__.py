@@ -23,7 +23,6 @@ from railfmu.experiments.engine.replay import imu_increments
 from railfmu.experiments.engine.study_protocol import RunData, Study, _num, observers_md, output
 from railfmu.experiments.trolley_survey import (
     ERRORS,
-    INCREMENTS,
     NAV,
     UNITS,
     error_metrics,
@@ -56,9 +55,13 @@ class TrolleyImuReplay(Study):
     """The INS on a replayed imu.csv, scored as ``trolley_survey`` scores it."""
     default_variant = "recorded"
     roles = ROLES
-    figures_of_signals = {"imu.png": ("Replayed IMU increments",
-                                      [[(f"imu.y_{k}", c) for k, c in enumerate(INCREMENTS[:3], 1)],
-                                       [(f"imu.y_{k}", c) for k, c in enumerate(INCREMENTS[3:], 4)]])}
+    figures_of_signals = {"imu.png": ("Replayed IMU increments (body x, y, z)",
+                                      [[(f"imu.y_{k}", f"angle increment {a}") for k, a in enumerate("xyz", 1)],
+                                       [(f"imu.y_{k}", f"velocity increment {a}") for k, a in enumerate("xyz", 4)]])}
+    #: the INS's outputs on its estimates figure, in the units a survey reads
+    quantities = {"latitude": "latitude [deg]", "longitude": "longitude [deg]", "height": "height",
+                  "vn": "velocity north", "ve": "velocity east", "vd": "velocity down", "roll": "roll [deg]",
+                  "pitch": "pitch [deg]", "heading": "heading [deg]"}
     summary_metrics = tuple(metric_name(k, s) for k in ERRORS for s in ("", "_30s", "_60s")) + ("wall_time_s",)
     #: imu.csv's velocity increments must fit the step (|dv| ~ g x step): a 100 Hz file at 5 ms counts each twice
     replay_checks = (imu_increments("imu", ("y_4", "y_5", "y_6")),)

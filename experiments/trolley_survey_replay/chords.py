@@ -91,7 +91,7 @@ def write_csv(path, c: ReplayChords) -> None:
 def figure(out, c: ReplayChords, title: str) -> str:
     """``chords.png``: alignment and level along the distance with the ± predicted sigma band
     (and the reference's), with a reference their differences and RMS (Fig. 14)."""
-    from railfmu.experiments.engine.plots import _pyplot
+    from railfmu.experiments.engine.plots import _pyplot, legend_outside, save
 
     plt = _pyplot()
     gap = np.flatnonzero(np.diff(c.grid.s) > 1.5 * c.grid.ds) + 1
@@ -117,14 +117,14 @@ def figure(out, c: ReplayChords, title: str) -> str:
             b.plot(s, d, lw=0.9, label=f"smoother − reference (RMS {rms:.3f} mm)")
             b.fill_between(s, -band, band, alpha=0.3, label="± predicted σ")
             b.set_ylabel(f"{name} difference [mm]")
-            b.legend(fontsize=8, loc="upper right")
+            legend_outside(b)
             b.grid(alpha=0.3)
         a.set_ylabel(f"{name} [mm]")
-        a.legend(fontsize=8, loc="upper right")
+        legend_outside(a)
         a.grid(alpha=0.3)
     ax[0].set_title(title)
-    ax[-1].set_xlabel("distance [m] (chord points s; 30 m chords, 5 m offset, 0.5 m spacing)")
+    ax[-1].set_xlabel("distance along the track [m] (chord points s; 30 m chords, 5 m offset, 0.5 m spacing)")
     fig.tight_layout()
-    fig.savefig(out / "chords.png", dpi=110)
+    save(fig, out / "chords.png")
     plt.close(fig)
     return "chords.png"
