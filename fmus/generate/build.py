@@ -415,17 +415,17 @@ def validate(path: Path | str, packaging: bool | None = None) -> list[str]:
     if not any(n.startswith("binaries/") and not n.endswith("/") for n in names) \
             and not any(n.startswith("sources/") for n in names):
         problems.append("neither binaries/ nor sources/: nothing can run it")
-    for folder, suffix in sorted({(binary_folder(p, v), s) for p, (_, _, s, _) in PLATFORMS.items()
-                                  for v in FMI_VERSIONS}):  # a platform's folder holds its library
+    folders = sorted({(binary_folder(p, v), s) for p, (_, _, s, _) in PLATFORMS.items() for v in FMI_VERSIONS})
+    for folder, suffix in folders:  # a platform's folder holds its library
         members = [n for n in names if n.startswith(f"binaries/{folder}/") and not n.endswith("/")]
         if members and not any(n.endswith(suffix) for n in members):
             problems.append(f"binaries/{folder}/ has no {suffix} library")
     if packaging is None:
         packaging = built_by_railfmu(path)
     if packaging:
-        if not any(n.startswith((f"binaries/{PLATFORM}/", f"binaries/{PLATFORM_FMI3}/")) and n.endswith(".so")
-                   for n in names):
-            problems.append(f"no binary in binaries/{PLATFORM}/ (FMI 3: binaries/{PLATFORM_FMI3}/; railfmu's packaging)")
+        if not any(n.startswith(f"binaries/{f}/") and n.endswith(suffix) for f, suffix in folders for n in names):
+            problems.append(f"no binary in {' or '.join(sorted(f'binaries/{f}/' for f, _ in folders))} "
+                            "(railfmu's packaging)")
         if not any(n.startswith("sources/") and n.endswith(".c") for n in names):
             problems.append("no C sources in sources/ (railfmu's packaging)")
     return problems
