@@ -181,6 +181,18 @@ def _eta(elapsed: float, done: int, total: int) -> str:
     return f"~{left:.0f} s left" if done < total else "done"
 
 
+def _scheduler_lost(client, scheduler: str, runs_dir: Path, done: int, total: int) -> UserError:
+    """The one line for a scheduler that went away mid-study: the runs received so far are
+    already in runs_dir; --resume runs the others (on any scheduler, or a local cluster)."""
+    import logging
+
+    logging.getLogger("distributed.client").setLevel(logging.CRITICAL)  # its reconnect's traceback
+    client.close(timeout=2)
+    return UserError(f"--scheduler {scheduler}: lost the scheduler after {done} of {total} runs; the "
+                     f"finished ones are kept in {runs_dir}: rerun with --resume (a running --scheduler, "
+                     "or none for a local cluster) to run the others")
+
+
 def run_study(name: str, out: Path | str | None = None, scheduler: str | None = None,
               master: str | None = None, workers: int | None = None, variants: list[str] | None = None,
               runs: int = 1, keep_runs: bool = False, seed: int | None = None, log=sys.stderr,
@@ -189,7 +201,10 @@ def run_study(name: str, out: Path | str | None = None, scheduler: str | None = 
     ``master`` None: each run takes the experiment's preferred master (its SSD's
     ``<rf:FixedStep master=...>``), else jacobi. ``resume``: keep the runs a previous study
     into ``out`` with the same settings finished (``out/runs``) and run only the others."""
+    from concurrent.futures import CancelledError
+
     from dask.distributed import Client, LocalCluster, as_completed
+    from distributed.comm.core import CommClosedError
 
     from railfmu.fmus.generate.build import build_all, default_out, sources_key
 
@@ -265,7 +280,12 @@ def run_study(name: str, out: Path | str | None = None, scheduler: str | None = 
                        for v, s in todo}
             for i, fut in enumerate(as_completed(futures), len(stored) + 1):
                 v, s = futures[fut]
-                result = fut.result()
+                try:
+                    result = fut.result()
+                except (CancelledError, CommClosedError) as exc:
+                    if not scheduler or client.status == "running":
+                        raise
+                    raise _scheduler_lost(client, scheduler, runs_dir, i - 1, total) from None
                 if isinstance(result, _MemberError):
                     raise UserError(f"variant {v}{f' seed {s}' if monte_carlo else ''}: {result}")
                 text, *results[v, s] = _canonical(result)
