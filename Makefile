@@ -39,7 +39,8 @@ test-slow: setup
 # then the hostile-file corpus, the seeded fuzzes (FUZZ_SEED, FUZZ_CASES: FMU states, table
 # readers, FMI call sequences) and the FMU tests run against them; any out-of-bounds access or
 # undefined behaviour aborts the run. Python itself is not instrumented, so the runtime is
-# preloaded and leak checks are off (CPython's own allocations).
+# preloaded and leak checks are off (CPython's own allocations); --capture=sys leaves the
+# sanitizer's report on the terminal (pytest's capture of fd 2 dies with the aborted process).
 SANITIZE_CACHE ?= build/sanitize
 FUZZ_SEED ?= 0
 FUZZ_CASES ?= 60
@@ -51,7 +52,7 @@ sanitize: setup
 	LD_PRELOAD="$$(gcc -print-file-name=libasan.so) $$(gcc -print-file-name=libubsan.so)" \
 	ASAN_OPTIONS=detect_leaks=0:abort_on_error=1 UBSAN_OPTIONS=print_stacktrace=1 \
 	RAILFMU_FUZZ_SEED=$(FUZZ_SEED) RAILFMU_FUZZ_CASES=$(FUZZ_CASES) \
-	$(BIN)/python -m pytest -q -p no:cacheprovider $(SANITIZE_TESTS)
+	$(BIN)/python -m pytest -q -p no:cacheprovider --capture=sys $(SANITIZE_TESTS)
 
 # The newest releases of every dependency instead of the lock: how the next refresh would fare.
 test-latest:

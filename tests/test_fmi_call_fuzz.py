@@ -158,3 +158,13 @@ def test_random_call_sequences_never_crash_and_every_error_has_a_reason(fmu_dir,
             s.fmu.doStep(0.0, 1e-3)
             assert not [m for st, _, m in s.messages[n:] if st in ("Error", "Fatal")]
     assert statuses.get("fmi2Error", 0) > 0 and statuses.get("OK or Warning", 0) > 0, statuses
+
+
+def test_a_trolley_step_too_long_to_integrate_is_refused(fmu_dir):
+    """Found by this fuzz under UBSan: a 1e300 s step overflowed the Trolley's panel count (a
+    double cast to an integer); it is now an error naming the limit, not garbage increments."""
+    with Slave(fmu_dir / "Trolley.fmu", "trolley") as s:
+        s.initialize(0.0)
+        with pytest.raises(FMICallException):
+            s.fmu.doStep(0.0, 1e300)
+        assert any("longer than 1e+07 s" in m for st, _, m in s.messages if st == "Error"), s.messages

@@ -414,6 +414,13 @@ int model_outputs(ModelInstance *m) {
     double *r = m->r, dth[3] = {0, 0, 0}, dv[3] = {0, 0, 0}, path = 0.0;
     EndPoint e;
     const double t = r[0];
+    /* the increments integrate in panels of at most MAX_PANEL: a step of 1e300 s would need
+       more panels than a counter holds (and never end) */
+    if (t - (t != d->last_end ? d->last_end : r[VR_interval_start]) > 1e9 * MAX_PANEL) {
+        model_error(m, "Trolley: a step to t = %g s is longer than %g s (1e9 integration panels of %g s)", t,
+                    1e9 * MAX_PANEL, MAX_PANEL);
+        return 1;
+    }
     if (t != d->last_end) { /* a new communication point */
         r[VR_interval_start] = d->last_end;
         r[VR_path_start] = r[VR_path_length];
