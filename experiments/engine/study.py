@@ -18,6 +18,7 @@ Each finished run's metrics (and series) go at once, atomically, to ``runs/<vari
 beside the settings they were run with (``runs/study.json``): ``--resume`` after a kill or a
 crash runs only the runs missing there, and the table is built from those files either way,
 so a resumed table equals an uninterrupted one. Without ``--resume`` a study starts afresh.
+A ``--scheduler`` lost midway ends the study with one line (the runs kept, and ``--resume``).
 Members write no files (no CSVs, plots or reports; ``--keep-runs`` keeps them, one
 sub-folder per variant and seed) and pay no per-run fixed cost a worker has already paid:
 imports stay loaded in the worker, the FMUs' up-to-date check derives no model.
@@ -282,7 +283,7 @@ def run_study(name: str, out: Path | str | None = None, scheduler: str | None = 
                 v, s = futures[fut]
                 try:
                     result = fut.result()
-                except (CancelledError, CommClosedError) as exc:
+                except (CancelledError, CommClosedError):
                     if not scheduler or client.status == "running":
                         raise
                     raise _scheduler_lost(client, scheduler, runs_dir, i - 1, total) from None
