@@ -21,7 +21,7 @@ from pathlib import Path
 import pytest
 from fmpy.fmi1 import FMICallException
 
-from railfmu.fmus.cosim.slave import Slave, Status
+from railfmu.fmus.cosim.slave import FMUError, Slave, Status
 from railfmu.models import all_models
 
 MODELS = [m.identifier for m in all_models()]
@@ -168,3 +168,59 @@ def test_a_trolley_step_too_long_to_integrate_is_refused(fmu_dir):
         with pytest.raises(FMICallException):
             s.fmu.doStep(0.0, 1e300)
         assert any("longer than 1e+07 s" in m for st, _, m in s.messages if st == "Error"), s.messages
+
+
+SWEEP = {"Real": [math.nan, math.inf, -math.inf, 1e308, -1e308, 5e-324, -1.0], "Integer": [INT_MAX, INT_MIN, -1],
+         "Boolean": [2, -1], "String": ["", "x" * 100_000, "/no/such/file.csv", str(HOSTILE / "signal" / "bad_nul_byte.csv")]}
+
+
+@pytest.mark.parametrize("ident", MODELS)
+def test_every_parameter_and_input_with_every_hostile_value(fmu_dir, ident):
+    """Each settable variable in turn, with each value of SWEEP for its type, set before the
+    end of initialisation: the set, the end of initialisation and a first step each succeed or
+    fail with a logged reason (a refused parameter names itself), and every variable can then
+    be read; a reset then starts over cleanly."""
+    with Slave(fmu_dir / f"{ident}.fmu", ident) as s:
+        f = s.fmu
+        by_type = {t: [v.valueReference for v in s.md.modelVariables if v.type == t] for t in SWEEP}
+        settable = [v for v in s.md.modelVariables if v.causality in ("parameter", "input")]
+        for v in settable:
+            for value in SWEEP[v.type]:
+                f.reset()
+                n = len(s.messages)
+                f.setupExperiment(startTime=0.0)
+                f.enterInitializationMode()
+                try:
+                    getattr(f, f"set{v.type}")([v.valueReference], [value])
+                    f.exitInitializationMode()
+                    f.doStep(0.0, 1e-3)
+                except FMICallException as exc:
+                    assert exc.status == Status.ERROR, (v.name, value, s.messages[n:])
+                    errors = [m for st, _, m in s.messages[n:] if st == "Error"]
+                    assert errors, f"{v.name} = {value!r}: {exc} without a logged reason"
+                for t, vrs in by_type.items():
+                    if vrs:
+                        try:
+                            getattr(f, f"get{t}")(vrs)
+                        except FMICallException:
+                            assert [m for st, _, m in s.messages[n:] if st == "Error"]
+        f.reset()
+        n = len(s.messages)
+        f.setupExperiment(startTime=0.0)
+        f.enterInitializationMode()
+        f.exitInitializationMode()
+        f.doStep(0.0, 1e-3)
+        assert not [m for st, _, m in s.messages[n:] if st in ("Error", "Fatal")]
+
+
+def test_a_trolley_stop_spacing_too_small_to_end_is_refused(fmu_dir):
+    """Found by the sweep above: stop_spacing = 5e-324 m never advanced the speed profile (s + D
+    == s), and initialisation never returned."""
+    from railfmu.models.errors import UserError
+    from railfmu.models.inertial.trolley import SpeedProfile
+
+    with Slave(fmu_dir / "Trolley.fmu", "trolley") as s:
+        with pytest.raises(FMUError, match="stop_spacing = 4.94066e-324 m gives more than 1e.06 stops"):
+            s.initialize(0.0, None, {"stop_spacing": 5e-324})
+    with pytest.raises(UserError, match="stop_spacing = 4.94066e-324 m gives more than 1e"):
+        SpeedProfile(600.0, 1.0, 0.5, 5e-324, 1.0, 1.0)

@@ -18,6 +18,7 @@
 
 enum { REST, ACCELERATE, CRUISE, BRAKE };
 #define MAX_PANEL 0.01 /* s: models/inertial/trolley.py MAX_PANEL */
+#define MAX_STOPS 1e6  /* models/inertial/trolley.py MAX_STOPS */
 /* 3-point Gauss-Legendre on [-1, 1]: nodes 0, +-sqrt(3/5), weights 8/9, 5/9 */
 static const double GL3_X = 0.7745966692414834, GL3_W0 = 0.8888888888888888, GL3_W1 = 0.5555555555555556;
 
@@ -145,6 +146,11 @@ static int build_profile(ModelInstance *m, Trolley *d) {
     const double *r = m->r, length = d->G.hs[d->G.nh], speed = r[VR_speed], acc = r[VR_acceleration];
     double t = r[VR_static_duration], s = 0.0;
     size_t cap = 0, i, n = 0;
+    if (length / r[VR_stop_spacing] > MAX_STOPS) { /* 5e-324 m: s + D == s, a loop without end */
+        model_error(m, "Trolley: parameter stop_spacing = %g m gives more than %g stops on the %g m track", r[VR_stop_spacing],
+                    MAX_STOPS, length);
+        return 1;
+    }
     if (add_phase(d, &cap, 0.0, REST, 0.0, 0.0, 0.0)) goto oom;
     while (s < length) {
         double D = r[VR_stop_spacing] < length - s ? r[VR_stop_spacing] : length - s, v, T, cruise;
