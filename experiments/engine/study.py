@@ -18,6 +18,7 @@ Each finished run's metrics (and series) go at once, atomically, to ``runs/<vari
 beside the settings they were run with (``runs/study.json``): ``--resume`` after a kill or a
 crash runs only the runs missing there, and the table is built from those files either way,
 so a resumed table equals an uninterrupted one. Without ``--resume`` a study starts afresh.
+A ``--scheduler`` lost midway ends the study with one line (the runs kept, and ``--resume``).
 Members write no files (no CSVs, plots or reports; ``--keep-runs`` keeps them, one
 sub-folder per variant and seed) and pay no per-run fixed cost a worker has already paid:
 imports stay loaded in the worker, the FMUs' up-to-date check derives no model.
@@ -181,6 +182,18 @@ def _eta(elapsed: float, done: int, total: int) -> str:
     return f"~{left:.0f} s left" if done < total else "done"
 
 
+def _scheduler_lost(client, scheduler: str, runs_dir: Path, done: int, total: int) -> UserError:
+    """The one line for a scheduler that went away mid-study: the runs received so far are
+    already in runs_dir; --resume runs the others (on any scheduler, or a local cluster)."""
+    import logging
+
+    logging.getLogger("distributed.client").setLevel(logging.CRITICAL)  # its reconnect's traceback
+    client.close(timeout=2)
+    return UserError(f"--scheduler {scheduler}: lost the scheduler after {done} of {total} runs; the "
+                     f"finished ones are kept in {runs_dir}: rerun with --resume (a running --scheduler, "
+                     "or none for a local cluster) to run the others")
+
+
 def run_study(name: str, out: Path | str | None = None, scheduler: str | None = None,
               master: str | None = None, workers: int | None = None, variants: list[str] | None = None,
               runs: int = 1, keep_runs: bool = False, seed: int | None = None, log=sys.stderr,
@@ -189,7 +202,10 @@ def run_study(name: str, out: Path | str | None = None, scheduler: str | None = 
     ``master`` None: each run takes the experiment's preferred master (its SSD's
     ``<rf:FixedStep master=...>``), else jacobi. ``resume``: keep the runs a previous study
     into ``out`` with the same settings finished (``out/runs``) and run only the others."""
+    from concurrent.futures import CancelledError
+
     from dask.distributed import Client, LocalCluster, as_completed
+    from distributed.comm.core import CommClosedError
 
     from railfmu.fmus.generate.build import build_all, default_out, sources_key
 
@@ -265,7 +281,12 @@ def run_study(name: str, out: Path | str | None = None, scheduler: str | None = 
                        for v, s in todo}
             for i, fut in enumerate(as_completed(futures), len(stored) + 1):
                 v, s = futures[fut]
-                result = fut.result()
+                try:
+                    result = fut.result()
+                except (CancelledError, CommClosedError):
+                    if not scheduler or client.status == "running":
+                        raise
+                    raise _scheduler_lost(client, scheduler, runs_dir, i - 1, total) from None
                 if isinstance(result, _MemberError):
                     raise UserError(f"variant {v}{f' seed {s}' if monte_carlo else ''}: {result}")
                 text, *results[v, s] = _canonical(result)

@@ -98,6 +98,7 @@ from railfmu.models.track.geometry import (
 
 PAPER = "Jiang et al. (2017)"
 REST, ACCELERATE, CRUISE, BRAKE = 0, 1, 2, 3
+MAX_STOPS = 1e6  # stops of the speed profile; the C has the same limit
 #: longest quadrature panel (s) and the 3-point Gauss-Legendre rule on [-1, 1] (nodes in the
 #: order the C visits them)
 MAX_PANEL = 0.01
@@ -123,6 +124,11 @@ class SpeedProfile:
         self.t0, self.kind, self.s0, self.v, self.T = [0.0], [REST], [0.0], [0.0], [0.0]
         t, s = static_duration, 0.0
         self.stops = []
+        if length / stop_spacing > MAX_STOPS:  # 5e-324 m: s + D == s, a loop without end
+            from railfmu.models.errors import UserError
+
+            raise UserError(f"Trolley: parameter stop_spacing = {stop_spacing:g} m gives more than {MAX_STOPS:g} "
+                            f"stops on the {length:g} m track")
         while s < length:
             D = min(stop_spacing, length - s)
             if length - (s + D) < 1e-9 * length:

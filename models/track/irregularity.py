@@ -451,11 +451,20 @@ class ProfileTable:
         """Read a CSV table; errors (as the FMU's) name the file and line."""
         path = Path(path)
         try:
-            text = path.read_text()
+            data = path.read_bytes()
         except OSError as e:
             raise ValueError(f"profile_file {path}: cannot open ({e.strerror})") from None
+        nul = data.find(b"\0")
+        if nul >= 0:  # as the C reader: never a table cut short at the NUL
+            line, start = data.count(b"\n", 0, nul) + 1, data.rfind(b"\n", 0, nul) + 1
+            raise ValueError(f"profile_file {path}:{line}: NUL byte at character {nul - start + 1} "
+                             "(a binary or UTF-16 file?)")
+        # a BOM (spreadsheet exports) as every table reader; bytes that are not UTF-8 stay in
+        # their cells (as U+FFFD), which are then not numbers; lines end at "\n" only, CR trimmed:
+        # the C reader's lines
+        text = data.decode("utf-8-sig", errors="replace")
         rows = []
-        lines = text.splitlines()
+        lines = text.split("\n")
         header = tuple(f.strip() for f in lines[0].split(",")) if lines else ()
         if header not in (PROFILE_HEADER, CAR_HEADER):
             raise ValueError(f"profile_file {path}:1: header must be {','.join(PROFILE_HEADER)} or "

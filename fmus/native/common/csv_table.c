@@ -131,6 +131,18 @@ static char *csv_read_file(CsvTable *t) {
     }
     fclose(f);
     buf[len] = '\0';
+    {   /* a NUL would end the text early: the rows after it would be lost unseen */
+        const char *nul = (const char *)memchr(buf, '\0', len), *q, *start = buf;
+        long line = 1;
+        if (nul) {
+            for (q = buf; q < nul; q++)
+                if (*q == '\n') line++, start = q + 1;
+            csv_fail(t, line, 0, "NUL byte at character %lu (a binary or UTF-16 file?)",
+                     (unsigned long)(nul - start) + 1);
+            free(buf);
+            return NULL;
+        }
+    }
     return buf;
 }
 

@@ -8,6 +8,7 @@
 #ifndef RAILFMU_PROFILE_TABLE_H
 #define RAILFMU_PROFILE_TABLE_H
 
+#include <math.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -34,7 +35,7 @@ static int profile_read(ModelInstance *m, const char *label, const char *file, P
     CsvTable t;
     size_t cap = 0, n = 0, i;
     int c, rc, ncol = 4, skip = 0; /* skip: the alignment column is absent (set to 0) */
-    if (csv_open(&t, m, label, file, CSV_COLON)) return 1;
+    if (csv_open(&t, m, label, file, CSV_COLON | CSV_SKIP_BOM)) return 1;
     for (c = 0; c < 4 && t.ncol == 4; c++)
         if (strcmp(t.header[c], header[c]) != 0) break;
     if (t.ncol == 3) {
@@ -97,6 +98,12 @@ static int profile_read(ModelInstance *m, const char *label, const char *file, P
             p->dy[3 * i + c] = (Y[3 * (i + 1) + c] - Y[3 * (i - 1) + c]) / (S[i + 1] - S[i - 1]);
         p->dy[3 * (n - 1) + c] = (Y[3 * (n - 1) + c] - Y[3 * (n - 2) + c]) / (S[n - 1] - S[n - 2]);
     }
+    for (i = 0; i < 3 * n; i++) /* finite numbers whose differences are not (near 1e308) */
+        if (!isfinite(p->dy[i]) || !isfinite(p->y[i] + p->dy[i] * (p->s[n - 1] - p->s[0]))) {
+            csv_fail(&t, 0, 0, "%s near s = %g: values too large for a profile (its slope is not finite)",
+                     header[i % 3 + 1], p->s[i / 3]);
+            goto fail;
+        }
     p->n = n;
     csv_close(&t);
     return 0;

@@ -113,6 +113,10 @@ static int load(ModelInstance *m, Table *d, const char *file) {
             header[j][L - 1] = '\0';
             header[j]++;
         }
+        if (!*header[j]) { /* e.g. a trailing comma: rows would then be blamed for it */
+            csv_fail(&t, 1, j + 1, "column %lu has no name", (unsigned long)j + 1);
+            goto done;
+        }
     }
     /* "time_s": the trolley survey's standard imu.csv and truth.csv */
     if (strcmp(header[0], "time") != 0 && strcmp(header[0], "time_s") != 0) {

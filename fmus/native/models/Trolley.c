@@ -18,6 +18,7 @@
 
 enum { REST, ACCELERATE, CRUISE, BRAKE };
 #define MAX_PANEL 0.01 /* s: models/inertial/trolley.py MAX_PANEL */
+#define MAX_STOPS 1e6  /* models/inertial/trolley.py MAX_STOPS */
 /* 3-point Gauss-Legendre on [-1, 1]: nodes 0, +-sqrt(3/5), weights 8/9, 5/9 */
 static const double GL3_X = 0.7745966692414834, GL3_W0 = 0.8888888888888888, GL3_W1 = 0.5555555555555556;
 
@@ -145,6 +146,11 @@ static int build_profile(ModelInstance *m, Trolley *d) {
     const double *r = m->r, length = d->G.hs[d->G.nh], speed = r[VR_speed], acc = r[VR_acceleration];
     double t = r[VR_static_duration], s = 0.0;
     size_t cap = 0, i, n = 0;
+    if (length / r[VR_stop_spacing] > MAX_STOPS) { /* 5e-324 m: s + D == s, a loop without end */
+        model_error(m, "Trolley: parameter stop_spacing = %g m gives more than %g stops on the %g m track", r[VR_stop_spacing],
+                    MAX_STOPS, length);
+        return 1;
+    }
     if (add_phase(d, &cap, 0.0, REST, 0.0, 0.0, 0.0)) goto oom;
     while (s < length) {
         double D = r[VR_stop_spacing] < length - s ? r[VR_stop_spacing] : length - s, v, T, cruise;
@@ -414,6 +420,13 @@ int model_outputs(ModelInstance *m) {
     double *r = m->r, dth[3] = {0, 0, 0}, dv[3] = {0, 0, 0}, path = 0.0;
     EndPoint e;
     const double t = r[0];
+    /* the increments integrate in panels of at most MAX_PANEL: a step of 1e300 s would need
+       more panels than a counter holds (and never end) */
+    if (t - (t != d->last_end ? d->last_end : r[VR_interval_start]) > 1e9 * MAX_PANEL) {
+        model_error(m, "Trolley: a step to t = %g s is longer than %g s (1e9 integration panels of %g s)", t,
+                    1e9 * MAX_PANEL, MAX_PANEL);
+        return 1;
+    }
     if (t != d->last_end) { /* a new communication point */
         r[VR_interval_start] = d->last_end;
         r[VR_path_start] = r[VR_path_length];
