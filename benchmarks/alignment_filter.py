@@ -8,7 +8,7 @@ Offline, on 20,000 synthetic samples (1 kHz; fastest of --repeat, one process):
 
 Online: ``railfmu.run("lateral_alignment", master=M, stop_time=20)`` under jacobi and container,
 the filter's ``wall_time_s`` (its step_block calls, summed) per sample beside the run's stepping
-time per sample. Goal: <= 2 us per sample online (the issue's 40 ms per 20 s run at 1 kHz), and the
+time per sample. Goal: <= 2 us per sample online (40 ms per 20 s run at 1 kHz), and the
 block estimates equal to the row-by-row ones bit for bit (checked here too).
 
     python benchmarks/alignment_filter.py [--repeat 5] [--skip-online]
