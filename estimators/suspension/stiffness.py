@@ -210,6 +210,11 @@ class JointSettings(CoachSettings):
     lag_max: float = setting(0.0, "s", "largest time shift between the rails taken as known and the vehicle "
                              "(a recording's position offset / speed) searched for; 0: none", ge=0)
     lag_window: float = setting(10.0, "s", "span at the start over which the shift is estimated", gt=0)
+    change_ratio: float = setting(0.0, "", "a change of k1 is declared when the mean normalised innovation "
+                                  "over change_window exceeds this times its running level; 0: never", ge=0)
+    change_window: float = setting(0.5, "s", "span of the innovation mean of the change test", gt=0)
+    change_holdoff: float = setting(3.0, "s", "no new change declared within this after one", ge=0)
+    change_theta_std: float = setting(0.3, "", "std of theta set when a change is declared", gt=0)
 
 
 class _CoachObserver(Observer):
@@ -502,6 +507,7 @@ class SuspensionJoint(_CoachObserver):
             Du = self.model.Du
             self.R = self.R + Du @ self._Su @ Du.T
         self._lag_samples = int(math.ceil(c.lag_max / self.dt)) if c.lag_max > 0 else 0
+        self._change_n = max(1, int(round(c.change_window / self.dt)))
         self.reset()
 
     def _reset(self) -> None:
@@ -512,6 +518,10 @@ class SuspensionJoint(_CoachObserver):
         self._buffer: list[tuple] = []  # (t, z, u, mask) while the shift is estimated and applied
         self._next = 0
         self.lag_s: float | None = None
+        self._nis: list[float] = []  # normalised innovation squared per update (change test)
+        self._nis_level: float | None = None
+        self._since_change = 0
+        self.changes = 0
 
     # -- a shift between the rails taken as known and the vehicle (lag_max > 0) --------------
     def step(self, t: float, z: np.ndarray, u: np.ndarray | None = None,
@@ -607,6 +617,31 @@ class SuspensionJoint(_CoachObserver):
         up = kalman.update(x, self._P, z, Ha, self.R, z_pred=H @ x[:14] + m.Du @ self._u, mask=mask)
         self._x, self._P = up.x, up.P
         self._x[14] = max(self._x[14], self.theta_min)
+        if self.config.change_ratio > 0 and up.nu.size:
+            self._change_test(float(up.nu @ np.linalg.solve(up.S, up.nu)) / up.nu.size)
+
+    def _change_test(self, nis: float) -> None:
+        """A step in k1 makes the innovations grow: when their normalised mean over the last
+        ``change_window`` exceeds ``change_ratio`` times their running level (an exponential
+        mean over ~20 s), theta's variance is set to ``change_theta_std^2`` (as at the start), so the
+        filter re-learns k1 at its start-up speed; ``q_theta`` can then stay small (less jitter)."""
+        c = self.config
+        self._nis.append(nis)
+        self._since_change += 1
+        n = self._change_n
+        if len(self._nis) < 2 * n:
+            return
+        recent = float(np.mean(self._nis[-n:]))
+        old = self._nis[-n - 1]
+        a = self.dt / 20.0
+        self._nis_level = old if self._nis_level is None else (1 - a) * self._nis_level + a * old
+        if (recent > c.change_ratio * self._nis_level
+                and self._since_change * self.dt > c.change_holdoff):
+            self._P[14, :] = 0.0
+            self._P[:, 14] = 0.0
+            self._P[14, 14] = c.change_theta_std ** 2
+            self._since_change = 0
+            self.changes += 1
 
     def _estimate(self) -> np.ndarray:
         ks = self.k1_initial
@@ -618,4 +653,6 @@ class SuspensionJoint(_CoachObserver):
                "q_theta": self.config.q_theta}
         if self._lag_samples:
             out["lag_s"] = self.lag_s
+        if self.config.change_ratio > 0:
+            out["changes"] = self.changes
         return out
