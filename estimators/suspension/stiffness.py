@@ -480,9 +480,29 @@ class SuspensionJoint(_CoachObserver):
       positions 1e-3 (m, rad), the velocities 1e-2 (m/s, rad/s); the state starts at rest.
     * ``theta`` is kept >= ``theta_min`` (0.05) so the model stays stable.
 
+    Rails from a track recording (all off by default: the rails are exact, as in the paper):
+
+    * ``rail_sigma`` (m), ``rail_rate_sigma`` (m/s): the error of the given rails. It drives the
+      design model like process noise, ``Q += G diag(rail_sigma^2 I4, rail_rate_sigma^2 I4) G^T``,
+      and reaches the bogie accelerometers directly, ``R += Du (...) Du^T``.
+    * ``lag_max`` (s): the recording's positions may be off (a position offset ``delta``; at
+      speed ``V`` the rails arrive ``delta / V`` early or late). The filter then runs ``lag_max``
+      (plus two samples) behind the data. Over the first ``lag_window`` s it buffers, simulates
+      the design model at ``k1_initial`` from rest on the given rails and takes the shift that
+      best aligns its bogie accelerations and roll rates with the measured ones (the
+      cross-correlation's peak, refined by a parabola); from then on it feeds the filter the
+      rails shifted back by it (heights by cubic Hermite with their rates, rates linearly).
+      The shift is one number per run: a constant speed (a varying one would need the shift
+      in position).
+    * ``change_ratio`` > 0: a change test on the innovations (:meth:`_change_test`) sets theta's
+      variance back up when they jump, so a fault is followed at start-up speed while a small
+      ``q_theta`` keeps the estimate steady in between.
+
     Settings: :class:`JointSettings` (``k1_initial`` N/m, ``sigma``, ``q_theta`` 1/s, ``q_acc``,
-    ``p0_theta``, ``p0_pos``, ``p0_vel``, ``theta_min``; as ``self.config``) and any
-    CoachVertical parameter.
+    ``p0_theta``, ``p0_pos``, ``p0_vel``, ``theta_min``, ``rail_sigma`` m, ``rail_rate_sigma``
+    m/s, ``lag_max`` s, ``lag_window`` s, ``change_ratio``, ``change_window`` s,
+    ``change_holdoff`` s, ``change_theta_std``; as ``self.config``) and any CoachVertical
+    parameter.
     """
 
     outputs: ClassVar[tuple[str, ...]] = ("k1", "k1_std", *STATES)
