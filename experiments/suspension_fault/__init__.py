@@ -126,7 +126,7 @@ class SuspensionFault(Study):
                   for name in ESTIMATORS if m.get(name)]
         L += ["", "Targets for `improved`: rel. error final <= 0.02 in every variant, convergence <= 20 s in "
               "`static`, detection delay <= 5 s in `step_fault`; with the recorded track "
-              "(`step_fault_recorded_track`, over 20 seeds, p95) rel. error final <= 0.02 and detection delay <= 3 s. "
+              "(`step_fault_recorded_track`, p95 over 20 Monte Carlo runs) rel. error final <= 0.02 and detection delay <= 3 s. "
               "`step_response` is Fig. 2 of Onat et al. (2016) (no estimation target)."]
         return "\n".join(L)
 
