@@ -643,8 +643,9 @@ class SuspensionJoint(_CoachObserver):
     def _change_test(self, nis: float) -> None:
         """A step in k1 makes the innovations grow: when their normalised mean over the last
         ``change_window`` exceeds ``change_ratio`` times their running level (an exponential
-        mean over ~20 s), theta's variance is set to ``change_theta_std^2`` (as at the start), so the
-        filter re-learns k1 at its start-up speed; ``q_theta`` can then stay small (less jitter)."""
+        mean over ~20 s), the covariance is set back to the start's ``P0`` with theta's std
+        ``change_theta_std``, so the filter re-learns k1 at its start-up speed; ``q_theta`` can
+        then stay small (less jitter)."""
         c = self.config
         self._nis.append(nis)
         self._since_change += 1
@@ -657,8 +658,9 @@ class SuspensionJoint(_CoachObserver):
         self._nis_level = old if self._nis_level is None else (1 - a) * self._nis_level + a * old
         if (recent > c.change_ratio * self._nis_level
                 and self._since_change * self.dt > c.change_holdoff):
-            self._P[14, :] = 0.0
-            self._P[:, 14] = 0.0
+            # as at the start: the states' variances too, so the jump in the innovations is
+            # shared between the states and theta (theta alone would overshoot)
+            self._P = self.P0.copy()
             self._P[14, 14] = c.change_theta_std ** 2
             self._since_change = 0
             self.changes += 1
