@@ -17,13 +17,14 @@ def all_models() -> list[Model]:
     from railfmu.models.sources.signal_table import SIGNAL_TABLE
     from railfmu.models.sources.step_source import STEP_SOURCE
     from railfmu.models.track.irregularity import TRACK
+    from railfmu.models.track.recording import TRACK_RECORDING
     from railfmu.models.vehicle.vehicle_lateral import VEHICLE_LATERAL
     from railfmu.models.train.longitudinal import TRAIN_LONGITUDINAL
     from railfmu.models.inertial.trolley import TROLLEY
     from railfmu.models.vehicle.wheelset import WHEELSET
 
     return [TRACK, WHEELSET, COACH_VERTICAL, STEP_SOURCE, SENSORS, VEHICLE_LATERAL, SIGNAL_TABLE,
-            TRAIN_LONGITUDINAL, GNSS_RECEIVER, DRIVER, IMU_ERRORS, TROLLEY]
+            TRAIN_LONGITUDINAL, GNSS_RECEIVER, DRIVER, IMU_ERRORS, TROLLEY, TRACK_RECORDING]
 
 
 __all__ = ["Input", "Model", "Output", "Parameter", "State", "Variable", "all_models"]

@@ -82,8 +82,13 @@ def _ops_imu(md):
              "steps": 1}]
 
 
+def _ops_recording(md):
+    """Disabled, each output is its exact_* input (the recording itself reads none)."""
+    return [{"params": {"enabled": False}}]
+
+
 SPECIAL = {"TrackIrregularity": _ops_track, "TrainLongitudinal": _ops_train, "Driver": _ops_driver,
-           "ImuErrors": _ops_imu}
+           "ImuErrors": _ops_imu, "TrackRecording": _ops_recording}
 
 
 def _inputs(md):

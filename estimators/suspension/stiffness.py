@@ -204,6 +204,17 @@ class JointSettings(CoachSettings):
     p0_theta: float = setting(0.3, "", "initial std of theta", gt=0)
     p0_pos: float = setting(1e-3, "m, rad", "initial std of the positions", gt=0)
     p0_vel: float = setting(1e-2, "m/s, rad/s", "initial std of the velocities", gt=0)
+    rail_sigma: float = setting(0.0, "m", "std of the error of the rail heights taken as known (0: exact, the "
+                                "paper's known track; a recording: its error)", ge=0)
+    rail_rate_sigma: float = setting(0.0, "m/s", "std of the error of the rail rates taken as known", ge=0)
+    lag_max: float = setting(0.0, "s", "largest time shift between the rails taken as known and the vehicle "
+                             "(a recording's position offset / speed) searched for; 0: none", ge=0)
+    lag_window: float = setting(10.0, "s", "span at the start over which the shift is estimated", gt=0)
+    change_ratio: float = setting(0.0, "", "a change of k1 is declared when the mean normalised innovation "
+                                  "over change_window exceeds this times its running level; 0: never", ge=0)
+    change_window: float = setting(0.5, "s", "span of the innovation mean of the change test", gt=0)
+    change_holdoff: float = setting(3.0, "s", "no new change declared within this after one", ge=0)
+    change_theta_std: float = setting(0.3, "", "std of theta set when a change is declared", gt=0)
 
 
 class _CoachObserver(Observer):
@@ -469,9 +480,29 @@ class SuspensionJoint(_CoachObserver):
       positions 1e-3 (m, rad), the velocities 1e-2 (m/s, rad/s); the state starts at rest.
     * ``theta`` is kept >= ``theta_min`` (0.05) so the model stays stable.
 
+    Rails from a track recording (all off by default: the rails are exact, as in the paper):
+
+    * ``rail_sigma`` (m), ``rail_rate_sigma`` (m/s): the error of the given rails. It drives the
+      design model like process noise, ``Q += G diag(rail_sigma^2 I4, rail_rate_sigma^2 I4) G^T``,
+      and reaches the bogie accelerometers directly, ``R += Du (...) Du^T``.
+    * ``lag_max`` (s): the recording's positions may be off (a position offset ``delta``; at
+      speed ``V`` the rails arrive ``delta / V`` early or late). The filter then runs ``lag_max``
+      (plus two samples) behind the data. Over the first ``lag_window`` s it buffers, simulates
+      the design model at ``k1_initial`` from rest on the given rails and takes the shift that
+      best aligns its bogie accelerations and roll rates with the measured ones (the
+      cross-correlation's peak, refined by a parabola); from then on it feeds the filter the
+      rails shifted back by it (heights by cubic Hermite with their rates, rates linearly).
+      The shift is one number per run: a constant speed (a varying one would need the shift
+      in position).
+    * ``change_ratio`` > 0: a change test on the innovations (:meth:`_change_test`) sets theta's
+      variance back up when they jump, so a fault is followed at start-up speed while a small
+      ``q_theta`` keeps the estimate steady in between.
+
     Settings: :class:`JointSettings` (``k1_initial`` N/m, ``sigma``, ``q_theta`` 1/s, ``q_acc``,
-    ``p0_theta``, ``p0_pos``, ``p0_vel``, ``theta_min``; as ``self.config``) and any
-    CoachVertical parameter.
+    ``p0_theta``, ``p0_pos``, ``p0_vel``, ``theta_min``, ``rail_sigma`` m, ``rail_rate_sigma``
+    m/s, ``lag_max`` s, ``lag_window`` s, ``change_ratio``, ``change_window`` s,
+    ``change_holdoff`` s, ``change_theta_std``; as ``self.config``) and any CoachVertical
+    parameter.
     """
 
     outputs: ClassVar[tuple[str, ...]] = ("k1", "k1_std", *STATES)
@@ -489,6 +520,14 @@ class SuspensionJoint(_CoachObserver):
         self.P0 = np.diag(np.square([c.p0_pos] * 7 + [c.p0_vel] * 7 + [c.p0_theta]))
         self.theta_min = c.theta_min
         self._I = np.eye(15)
+        # an error in the rails taken as known enters like process and measurement noise
+        self._Su = np.diag([c.rail_sigma ** 2] * 4 + [c.rail_rate_sigma ** 2] * 4)
+        self._rails_uncertain = c.rail_sigma > 0 or c.rail_rate_sigma > 0
+        if self._rails_uncertain:
+            Du = self.model.Du
+            self.R = self.R + Du @ self._Su @ Du.T
+        self._lag_samples = int(math.ceil(c.lag_max / self.dt)) if c.lag_max > 0 else 0
+        self._change_n = max(1, int(round(c.change_window / self.dt)))
         self.reset()
 
     def _reset(self) -> None:
@@ -496,6 +535,82 @@ class SuspensionJoint(_CoachObserver):
         self._x[14] = 1.0
         self._P = self.P0.copy()
         self._u = np.zeros(8)
+        self._buffer: list[tuple] = []  # (t, z, u, mask) while the shift is estimated and applied
+        self._next = 0
+        self.lag_s: float | None = None
+        self._nis: list[float] = []  # normalised innovation squared per update (change test)
+        self._nis_level: float | None = None
+        self._since_change = 0
+        self.changes = 0
+
+    # -- a shift between the rails taken as known and the vehicle (lag_max > 0) --------------
+    def step(self, t: float, z: np.ndarray, u: np.ndarray | None = None,
+             mask: np.ndarray | None = None) -> np.ndarray:
+        """As :meth:`Observer.step`; with ``lag_max`` > 0 the filter runs ``lag_max`` (plus two
+        samples) behind the data: the rails at the vehicle at ``t`` are the given rails at
+        ``t - lag`` (``lag``: estimated over the first ``lag_window``), which may lie ahead."""
+        if not self._lag_samples:
+            return super().step(t, z, u, mask)
+        self._buffer.append((float(t), np.array(z, dtype=float), np.array(u, dtype=float),
+                             None if mask is None else np.array(mask, dtype=bool)))
+        if self.lag_s is None:
+            if self._buffer[-1][0] - self._buffer[0][0] < self.config.lag_window:
+                return self._estimate()  # the initial estimate until the shift is known
+            self.lag_s = self._estimate_lag()
+        out = None
+        while self._next + self._lag_samples + 2 <= len(self._buffer):
+            tk, zk, _, mk = self._buffer[self._next]
+            out = super().step(tk, zk, self._shifted_input(self._next), mk)
+            self._next += 1
+        return self._estimate() if out is None else out
+
+    def _estimate_lag(self) -> float:
+        """The shift ``lag`` (s) that best aligns the bogie sensors with the design model's
+        response (at ``k1_initial``, from rest) to the given rails: the peak of their
+        cross-correlation over ``+-lag_max``, refined by a parabola through its neighbours.
+        The bogie signals come mostly through the primary suspension, so ``k1`` barely moves
+        the peak."""
+        U = np.array([b[2] for b in self._buffer])
+        Z = np.array([b[1] for b in self._buffer])
+        m = self.model
+        F, G, _ = m.discretize(self.k1_initial, self.dt)
+        H = m.H(self.k1_initial)
+        x = np.zeros(14)
+        Yh = np.empty_like(Z)
+        for k in range(U.shape[0]):
+            uk = np.nan_to_num(U[k])
+            Yh[k] = H @ x + m.Du @ uk
+            x = F @ x + G @ uk
+        rows = [SENSORS.index(c) for c in ("ddz_b1", "dphi_b1", "ddz_b2", "dphi_b2")]
+        y = np.nan_to_num(Z[:, rows] / self.sigma[rows])
+        yh = Yh[:, rows] / self.sigma[rows]
+        L, n = self._lag_samples, y.shape[0]
+        start = min(n - 1, L + int(round(1.0 / self.dt)))  # the model's start from rest: 1 s
+        lags = np.arange(-L, L + 1)
+        c = np.array([float(np.sum(y[start:n - L] * yh[start - j:n - L - j])) for j in lags])
+        i = int(np.argmax(c))
+        frac = 0.0
+        if 0 < i < lags.size - 1:
+            den = c[i - 1] - 2.0 * c[i] + c[i + 1]
+            frac = 0.5 * (c[i - 1] - c[i + 1]) / den if den < 0 else 0.0
+        return float((lags[i] + frac) * self.dt)
+
+    def _shifted_input(self, k: int) -> np.ndarray:
+        """The rails at sample ``k`` shifted by ``lag``: heights by cubic Hermite with their
+        rates, rates linearly, between the two given samples around ``t_k - lag``."""
+        p = k - self.lag_s / self.dt
+        i0 = int(math.floor(p))
+        a = p - i0
+        last = len(self._buffer) - 1
+        u0 = self._buffer[min(max(i0, 0), last)][2]
+        u1 = self._buffer[min(max(i0 + 1, 0), last)][2]
+        h = self.dt
+        h00, h10 = 2 * a**3 - 3 * a**2 + 1, a**3 - 2 * a**2 + a
+        h01, h11 = -2 * a**3 + 3 * a**2, a**3 - a**2
+        out = np.empty(8)
+        out[:4] = h00 * u0[:4] + h10 * h * u0[4:] + h01 * u1[:4] + h11 * h * u1[4:]
+        out[4:] = (1 - a) * u0[4:] + a * u1[4:]
+        return out
 
     def _predict(self) -> None:
         x, m = self._x, self.model
@@ -505,7 +620,11 @@ class SuspensionJoint(_CoachObserver):
         Fa[:14, :14] = F
         Fa[:14, 14] = g
         x[:14] = F @ x[:14] + G @ self._u
-        self._P = kalman.predict_covariance(self._P, Fa, self.Q)
+        Q = self.Q
+        if self._rails_uncertain:
+            Q = Q.copy()
+            Q[:14, :14] += G @ self._Su @ G.T
+        self._P = kalman.predict_covariance(self._P, Fa, Q)
         self._hold_rails()
 
     def _update(self, z: np.ndarray, mask: np.ndarray) -> None:
@@ -518,6 +637,33 @@ class SuspensionJoint(_CoachObserver):
         up = kalman.update(x, self._P, z, Ha, self.R, z_pred=H @ x[:14] + m.Du @ self._u, mask=mask)
         self._x, self._P = up.x, up.P
         self._x[14] = max(self._x[14], self.theta_min)
+        if self.config.change_ratio > 0 and up.nu.size:
+            self._change_test(float(up.nu @ np.linalg.solve(up.S, up.nu)) / up.nu.size)
+
+    def _change_test(self, nis: float) -> None:
+        """A step in k1 makes the innovations grow: when their normalised mean over the last
+        ``change_window`` exceeds ``change_ratio`` times their running level (an exponential
+        mean over ~20 s), the covariance is set back to the start's ``P0`` with theta's std
+        ``change_theta_std``, so the filter re-learns k1 at its start-up speed; ``q_theta`` can
+        then stay small (less jitter)."""
+        c = self.config
+        self._nis.append(nis)
+        self._since_change += 1
+        n = self._change_n
+        if len(self._nis) < 2 * n:
+            return
+        recent = float(np.mean(self._nis[-n:]))
+        old = self._nis[-n - 1]
+        a = self.dt / 20.0
+        self._nis_level = old if self._nis_level is None else (1 - a) * self._nis_level + a * old
+        if (recent > c.change_ratio * self._nis_level
+                and self._since_change * self.dt > c.change_holdoff):
+            # as at the start: the states' variances too, so the jump in the innovations is
+            # shared between the states and theta (theta alone would overshoot)
+            self._P = self.P0.copy()
+            self._P[14, 14] = c.change_theta_std ** 2
+            self._since_change = 0
+            self.changes += 1
 
     def _estimate(self) -> np.ndarray:
         ks = self.k1_initial
@@ -525,5 +671,10 @@ class SuspensionJoint(_CoachObserver):
 
     def finish(self) -> dict:
         est = self._estimate()
-        return {**super().finish(), "k1": float(est[0]), "k1_std": float(est[1]),
-                "q_theta": self.config.q_theta}
+        out = {**super().finish(), "k1": float(est[0]), "k1_std": float(est[1]),
+               "q_theta": self.config.q_theta}
+        if self._lag_samples:
+            out["lag_s"] = self.lag_s
+        if self.config.change_ratio > 0:
+            out["changes"] = self.changes
+        return out
