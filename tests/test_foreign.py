@@ -48,25 +48,33 @@ RUNS = {
        for i in (1, 2)},
     # the crane demo (20-sim, OSP step annotation): runs; tests/interop compares it with libcosim
     "libcosim/demo": ([], {}),
+    # FMI 1.0 (ViProMa's identity FMU): identity1.realIn bound by two .ssv files, the later
+    # (4) over the earlier (2); identity2.realIn = 1.3 * 4 + 50 through the connection's
+    # LinearTransformation. libcosim takes the first .ssv as its default set (2 -> 52.6) and
+    # the second as the named set "initialValues2" (its own test reads 4 from that);
+    # tests/interop compares every row with libcosim at realIn = 2
+    "libcosim/linear_transformation": (["identity1.realOut", "identity2.realIn", "identity2.realOut"],
+                                       {"identity1.realOut": 4.0, "identity2.realIn": 55.2,
+                                        "identity2.realOut": 55.2}),
 }
 # case -> the words of the one-line refusal
 REFUSED = {
     "libcosim/demo/proxy": "proxyfmu://",  # libcosim's remote FMU proxy
-    # FMI 1.0 Co-Simulation (runs once railfmu's slaves take FMI 1.0)
-    "libcosim/linear_transformation": "1.0",
     # starts at 5 s: the crane model's actuator limits are NaN at 5.001 s (in libcosim too)
     "libcosim/demo/no_algorithm_element": "non-finite value",
 }
 # the crane's controller and crane feed each other through direct feedthrough: an algebraic
 # loop, which the Gauss-Seidel master refuses in one line (Jacobi and the container run it)
 LOOPS = {"libcosim/demo", "libcosim/demo/no_algorithm_element"}
-STOP = {"libcosim/demo": 0.1, "libcosim/demo/no_algorithm_element": 5.1}  # s: the SSDs give none
+STOP = {"libcosim/demo": 0.1, "libcosim/demo/no_algorithm_element": 5.1,  # s: the SSDs give none
+        "libcosim/linear_transformation": 0.1}
+STEP = {"libcosim/linear_transformation": 1e-3}  # s: no step anywhere; libcosim's own test's
 
 
 def test_the_corpus_is_covered():
     assert sorted(SSPS) == sorted([*RUNS, *REFUSED])
-    # 8 of the 11 run (the FMI 1.0 one joins them when railfmu's slaves take FMI 1.0)
-    assert len(RUNS) >= 8
+    # 9 of the 11 run (FMI 1.0 included)
+    assert len(RUNS) >= 9
 
 
 @pytest.mark.parametrize("master", MASTERS)
@@ -74,7 +82,7 @@ def test_the_corpus_is_covered():
 def test_corpus_ssp_runs_and_agrees_or_is_refused_in_one_line(case, master):
     record, expected = RUNS.get(case, ([], {}))
     try:
-        system = read_system(SSPS[case], stop_time=STOP.get(case))
+        system = read_system(SSPS[case], stop_time=STOP.get(case), step_size=STEP.get(case))
         system.record = list(record)
         res = run(system, master, progress=False)
     except UserError as exc:
@@ -83,12 +91,8 @@ def test_corpus_ssp_runs_and_agrees_or_is_refused_in_one_line(case, master):
             assert msg.startswith("algebraic loop: ") and "\n" not in msg, msg
             return
         assert case in REFUSED and "\n" not in msg, msg
-        if case == "libcosim/linear_transformation" and "1.0" not in msg:
-            return  # FMI 1.0 read
         assert REFUSED[case] in msg, msg
         return
-    if case in REFUSED and case == "libcosim/linear_transformation":
-        return  # FMI 1.0 runs
     assert case in RUNS, f"{case} runs: move it to RUNS with its expected values"
     assert res.complete and res.end_time == pytest.approx(system.stop_time)
     assert np.isfinite(res.data).all()
