@@ -56,25 +56,37 @@ RUNS = {
     "libcosim/linear_transformation": (["identity1.realOut", "identity2.realIn", "identity2.realOut"],
                                        {"identity1.realOut": 4.0, "identity2.realIn": 55.2,
                                         "identity2.realOut": 55.2}),
+    # Vico's FMI 1.0 BouncingBall (the FMI SDK's), dropped from h = 2 (inline) and h = 5 (.ssv):
+    # the first row; test_vico_bouncing_ball_equals_fmpy checks the whole run
+    "vico/bouncingBall": (["bouncingBall.h"], {}),
+    "vico/bouncingBall/external_ssv": (["bouncingBall.h"], {}),
+    # 20-sim FMUs with Windows binaries and C sources (compiled); tests/interop has no Vico
+    "vico/quarter-truck": ([], {}),
+    # OSP's dynamic-positioning ship (FMI 1.0 and 2.0 FMUs, one whose modelDescription repeats
+    # variable names: read with a warning); tests/interop compares it with libcosim
+    "vico/dp-ship": ([], {}),
 }
 # case -> the words of the one-line refusal
 REFUSED = {
     "libcosim/demo/proxy": "proxyfmu://",  # libcosim's remote FMU proxy
+    "vico/bouncingBall/proxyfmu": "proxyfmu://",
     # starts at 5 s: the crane model's actuator limits are NaN at 5.001 s (in libcosim too)
     "libcosim/demo/no_algorithm_element": "non-finite value",
 }
 # the crane's controller and crane feed each other through direct feedthrough: an algebraic
 # loop, which the Gauss-Seidel master refuses in one line (Jacobi and the container run it)
-LOOPS = {"libcosim/demo", "libcosim/demo/no_algorithm_element"}
+# (the quarter-truck's chassis and wheel, and the ship's observer loop, likewise)
+LOOPS = {"libcosim/demo", "libcosim/demo/no_algorithm_element", "vico/quarter-truck", "vico/dp-ship"}
 STOP = {"libcosim/demo": 0.1, "libcosim/demo/no_algorithm_element": 5.1,  # s: the SSDs give none
-        "libcosim/linear_transformation": 0.1}
+        "libcosim/linear_transformation": 0.1, "vico/quarter-truck": 1.0, "vico/dp-ship": 2.0}
 STEP = {"libcosim/linear_transformation": 1e-3}  # s: no step anywhere; libcosim's own test's
 
 
 def test_the_corpus_is_covered():
     assert sorted(SSPS) == sorted([*RUNS, *REFUSED])
-    # 9 of the 11 run (FMI 1.0 included)
-    assert len(RUNS) >= 9
+    # 13 of the 16 run (FMI 1.0 included); the 3 refused: two remote proxies and a start
+    # time at which the model's own values are NaN
+    assert len(RUNS) >= 13
 
 
 @pytest.mark.parametrize("master", MASTERS)
@@ -362,3 +374,36 @@ def test_an_enumeration_signal_is_connected_and_recorded(reference_dir, tmp_path
     system = read_system(tmp_path, step_size=0.01, overrides={"a": {"Int32_input": "2"}})
     system.record = ["b.Enumeration_output"]
     assert run(system, "jacobi", progress=False).data[-1, 1] == 2
+
+
+@pytest.mark.parametrize("case, h0", [("vico/bouncingBall", 2.0), ("vico/bouncingBall/external_ssv", 5.0)])
+def test_vico_bouncing_ball_equals_fmpy(case, h0):
+    """Vico's FMI 1.0 BouncingBall SSPs (Vico's step annotation, 10 ms; h bound inline or in an
+    .ssv): every sample equals ``fmpy.simulate_fmu`` from the same start height (Vico itself
+    is a Java tool, not run here); the ball first lands at sqrt(2 h0 / 9.81)."""
+    import fmpy
+
+    system = read_system(SSPS[case])
+    assert system.step_size == 0.01 and system.step_size_from.startswith("the com.github.ntnu-ihb.vico annotation")
+    system.record = ["bouncingBall.h", "bouncingBall.v"]
+    res = run(system, "jacobi", progress=False)
+    theirs = fmpy.simulate_fmu(str(system.components[0].fmu), start_values={"h": h0}, stop_time=10.0,
+                               output_interval=0.01, step_size=0.01, fmi_type="CoSimulation")
+    assert len(res.data) == len(theirs) == 1001
+    for j, name in enumerate(["time", "h", "v"]):
+        np.testing.assert_array_equal(res.data[:, j], theirs[name], err_msg=name)
+    t, v = res.data[:, 0], res.data[:, 2]
+    first_bounce = t[np.argmax(v > 0)]
+    assert first_bounce == pytest.approx(np.sqrt(2 * h0 / 9.81), abs=0.02)  # the FMU's Euler steps, 10 ms rows
+
+
+def test_an_fmu_fmpy_validation_rejects_is_read_with_one_warning(tmp_path):
+    """OSP's DP ship: DPController.fmu (Simulink) repeats three variable names, which FMPy's
+    validation rejects; the FMU is read without it, one warning line names the problem."""
+    res = subprocess.run([sys.executable, "-m", "railfmu.experiments.engine.cli", "run", "-q",
+                          str(SSPS["vico/dp-ship"]), "--stop-time", "0.2", "--out", str(tmp_path / "out")],
+                         capture_output=True, text=True)
+    assert res.returncode == 0 and "Traceback" not in res.stderr, res.stderr
+    lines = [line for line in res.stderr.splitlines() if "validation" in line]
+    assert len(lines) == 1 and "DPController.fmu" in lines[0] and '"iex"' in lines[0] and "not unique" in lines[0], lines
+    assert len((tmp_path / "out" / "signals.csv").read_text().splitlines()) == 1 + 6  # 0.2 s at 0.04 s

@@ -15,6 +15,7 @@ import hashlib
 import math
 import os
 import shutil
+import sys
 import tempfile
 import zipfile
 from dataclasses import dataclass, field
@@ -234,7 +235,11 @@ def _read_model(fmu: Path, where: str):
     try:
         md = read_model_description(str(fmu))
     except Exception as exc:  # noqa: BLE001 - fmpy raises anything from BadZipFile to ValidationError
-        raise UserError(f"{where}: cannot read {fmu.name}: {' '.join(str(exc).split())}") from None
+        md = _unvalidated(fmu, exc)
+        if md is None:
+            raise UserError(f"{where}: cannot read {fmu.name}: {' '.join(str(exc).split())}") from None
+        print(f"railfmu: warning: {where}: {fmu.name}: {_validation_problems(exc)}; read without FMPy's "
+              "validation (a repeated variable name means the last variable of that name)", file=sys.stderr)
     from railfmu.fmus.cosim.slave import fmi2_types, fmi_version
 
     if fmi_version(md) is None or md.coSimulation is None:
@@ -250,6 +255,26 @@ def _read_model(fmu: Path, where: str):
         raise UserError(f"{where}: {fmu.name} has no binary for this platform ({_platform(fmi_version(md))}) and no "
                         "sources/ to compile one from")
     return _compiled(fmu, where), md
+
+
+def _unvalidated(fmu: Path, exc: Exception):
+    """The model description without FMPy's validation when only the validation failed (a
+    Simulink FMU that repeats a variable name runs all the same), else None."""
+    from fmpy import read_model_description
+    from fmpy.model_description import ValidationError
+
+    if not isinstance(exc, ValidationError):
+        return None
+    try:
+        return read_model_description(str(fmu), validate=False)
+    except Exception:  # noqa: BLE001 - unreadable without validation too: the first error stands
+        return None
+
+
+def _validation_problems(exc: Exception) -> str:
+    problems = [" ".join(p.split()) for p in getattr(exc, "problems", [])] or [" ".join(str(exc).split())]
+    shown = "; ".join(problems[:3]) + (f"; and {len(problems) - 3} more" if len(problems) > 3 else "")
+    return f"modelDescription.xml fails FMPy's validation ({shown})"
 
 
 def _compiled(fmu: Path, where: str) -> Path:
