@@ -398,7 +398,7 @@ def test_vico_bouncing_ball_equals_fmpy(case, h0):
 
 
 def test_an_fmu_fmpy_validation_rejects_is_read_with_one_warning(tmp_path):
-    """OSP's DP ship: DPController.fmu (Simulink) repeats three variable names, which FMPy's
+    """OSP's DP ship: DPController.fmu repeats three variable names, which FMPy's
     validation rejects; the FMU is read without it, one warning line names the problem."""
     res = subprocess.run([sys.executable, "-m", "railfmu.experiments.engine.cli", "run", "-q",
                           str(SSPS["vico/dp-ship"]), "--stop-time", "0.2", "--out", str(tmp_path / "out")],

@@ -258,8 +258,8 @@ def _read_model(fmu: Path, where: str):
 
 
 def _unvalidated(fmu: Path, exc: Exception):
-    """The model description without FMPy's validation when only the validation failed (a
-    Simulink FMU that repeats a variable name runs all the same), else None."""
+    """The model description without FMPy's validation when only the validation failed (an FMU
+    that repeats a variable name runs all the same), else None."""
     from fmpy import read_model_description
     from fmpy.model_description import ValidationError
 

@@ -175,9 +175,10 @@ def test_osp_dp_ship_agrees_with_libcosim_until_its_controller_acts():
     """OSP's dynamic-positioning ship (Vico's test data: FMI 1.0 and 2.0 FMUs, an OSP step
     annotation of 40 ms): every Real output of railfmu's Jacobi master equals libcosim's to
     1e-9 of its range for the first 1.96 s (48 steps). NOT agreeing after: from 2 s libcosim's
-    DP controller (a Simulink FMI 1.0 FMU) acts (ControlMz -263 at 2 s) while railfmu's stays
-    at 0, although the same FMU alone acts at 2 s in railfmu as in FMPy; an open finding
-    (docs/interoperability.md), not a tolerance."""
+    DP controller (an FMI 1.0 FMU) acts (ControlMz -263 at 2 s) while railfmu's stays at 0: the
+    FMU stops sampling when its outputs are read between setting its inputs and its next
+    fmiDoStep, which railfmu does to record the row at t and libcosim does not (an open
+    finding, docs/interoperability.md; not a tolerance)."""
     pytest.importorskip("libcosimpy", reason="libcosimpy is not installed")
     from libcosimpy.CosimEnums import CosimVariableType
     from libcosimpy.CosimExecution import CosimExecution
