@@ -20,6 +20,8 @@ SSPS = {
        for p in sorted((FOREIGN / "libcosim" / "ssp").rglob("SystemStructure.ssd"))},
     **{f"omsimulator/{p.parent.name}": p.parent
        for p in sorted((FOREIGN / "omsimulator").glob("*/SystemStructure.ssd"))},
+    **{f"vico/{p.parent.relative_to(FOREIGN / 'vico' / 'ssp')}": p.parent
+       for p in sorted((FOREIGN / "vico" / "ssp").rglob("SystemStructure.ssd"))},
 }
 
 

@@ -48,33 +48,57 @@ RUNS = {
        for i in (1, 2)},
     # the crane demo (20-sim, OSP step annotation): runs; tests/interop compares it with libcosim
     "libcosim/demo": ([], {}),
+    # FMI 1.0 (ViProMa's identity FMU): identity1.realIn bound by two .ssv files, the later
+    # (4) over the earlier (2); identity2.realIn = 1.3 * 4 + 50 through the connection's
+    # LinearTransformation. libcosim takes the first .ssv as its default set (2 -> 52.6) and
+    # the second as the named set "initialValues2" (its own test reads 4 from that);
+    # tests/interop compares every row with libcosim at realIn = 2
+    "libcosim/linear_transformation": (["identity1.realOut", "identity2.realIn", "identity2.realOut"],
+                                       {"identity1.realOut": 4.0, "identity2.realIn": 55.2,
+                                        "identity2.realOut": 55.2}),
+    # Vico's FMI 1.0 BouncingBall (the FMI SDK's), dropped from h = 2 (inline) and h = 5 (.ssv):
+    # the first row; test_vico_bouncing_ball_equals_fmpy checks the whole run
+    "vico/bouncingBall": (["bouncingBall.h"], {}),
+    "vico/bouncingBall/external_ssv": (["bouncingBall.h"], {}),
+    # 20-sim FMUs with Windows binaries and C sources (compiled); tests/interop has no Vico
+    "vico/quarter-truck": ([], {}),
+    # OSP's dynamic-positioning ship (FMI 1.0 and 2.0 FMUs, one whose modelDescription repeats
+    # variable names: read with a warning); tests/interop compares it with libcosim
+    "vico/dp-ship": ([], {}),
 }
 # case -> the words of the one-line refusal
 REFUSED = {
     "libcosim/demo/proxy": "proxyfmu://",  # libcosim's remote FMU proxy
-    # FMI 1.0 Co-Simulation (runs once railfmu's slaves take FMI 1.0)
-    "libcosim/linear_transformation": "1.0",
+    "vico/bouncingBall/proxyfmu": "proxyfmu://",
     # starts at 5 s: the crane model's actuator limits are NaN at 5.001 s (in libcosim too)
     "libcosim/demo/no_algorithm_element": "non-finite value",
 }
 # the crane's controller and crane feed each other through direct feedthrough: an algebraic
 # loop, which the Gauss-Seidel master refuses in one line (Jacobi and the container run it)
-LOOPS = {"libcosim/demo", "libcosim/demo/no_algorithm_element"}
-STOP = {"libcosim/demo": 0.1, "libcosim/demo/no_algorithm_element": 5.1}  # s: the SSDs give none
+# (the quarter-truck's chassis and wheel, and the ship's observer loop, likewise)
+LOOPS = {"libcosim/demo", "libcosim/demo/no_algorithm_element", "vico/quarter-truck", "vico/dp-ship"}
+STOP = {"libcosim/demo": 0.1, "libcosim/demo/no_algorithm_element": 5.1,  # s: the SSDs give none
+        "libcosim/linear_transformation": 0.1, "vico/quarter-truck": 1.0, "vico/dp-ship": 2.0}
+STEP = {"libcosim/linear_transformation": 1e-3}  # s: no step anywhere; libcosim's own test's
 
 
 def test_the_corpus_is_covered():
     assert sorted(SSPS) == sorted([*RUNS, *REFUSED])
-    # 8 of the 11 run (the FMI 1.0 one joins them when railfmu's slaves take FMI 1.0)
-    assert len(RUNS) >= 8
+    # 13 of the 16 run (FMI 1.0 included); the 3 refused: two remote proxies and a start
+    # time at which the model's own values are NaN
+    assert len(RUNS) >= 13
+
+
+# compiling the quarter-truck's three 20-sim FMUs from their sources takes ~17 s (measured)
+SLOW = {"vico/quarter-truck"}
 
 
 @pytest.mark.parametrize("master", MASTERS)
-@pytest.mark.parametrize("case", sorted(SSPS))
+@pytest.mark.parametrize("case", [pytest.param(c, marks=pytest.mark.slow) if c in SLOW else c for c in sorted(SSPS)])
 def test_corpus_ssp_runs_and_agrees_or_is_refused_in_one_line(case, master):
     record, expected = RUNS.get(case, ([], {}))
     try:
-        system = read_system(SSPS[case], stop_time=STOP.get(case))
+        system = read_system(SSPS[case], stop_time=STOP.get(case), step_size=STEP.get(case))
         system.record = list(record)
         res = run(system, master, progress=False)
     except UserError as exc:
@@ -83,12 +107,8 @@ def test_corpus_ssp_runs_and_agrees_or_is_refused_in_one_line(case, master):
             assert msg.startswith("algebraic loop: ") and "\n" not in msg, msg
             return
         assert case in REFUSED and "\n" not in msg, msg
-        if case == "libcosim/linear_transformation" and "1.0" not in msg:
-            return  # FMI 1.0 read
         assert REFUSED[case] in msg, msg
         return
-    if case in REFUSED and case == "libcosim/linear_transformation":
-        return  # FMI 1.0 runs
     assert case in RUNS, f"{case} runs: move it to RUNS with its expected values"
     assert res.complete and res.end_time == pytest.approx(system.stop_time)
     assert np.isfinite(res.data).all()
@@ -117,23 +137,35 @@ def reference_dir(tmp_path_factory):
     return tmp_path_factory.mktemp("reference-fmus")
 
 
-@pytest.mark.parametrize("model", ["BouncingBall", "Dahlquist", "VanDerPol"])
-def test_single_reference_fmu_equals_fmpy_simulate(model, reference_dir):
+@pytest.mark.parametrize("model, fmi_version", [*[(m, 2) for m in ("BouncingBall", "Dahlquist", "VanDerPol")],
+                                                *[(m, 3) for m in ("BouncingBall", "Dahlquist", "VanDerPol",
+                                                                   "Feedthrough")]])
+def test_single_reference_fmu_equals_fmpy_simulate(model, fmi_version, reference_dir):
     """``railfmu run X.fmu``'s system (the FMU's default experiment, FMPy's output interval)
-    gives FMPy's samples exactly: one FMU, the same calls in the same order."""
+    gives FMPy's samples exactly: one FMU, the same calls in the same order. FMI 3: the
+    sources as the Reference-FMUs ship them (buildDescription.xml, prefixed function names)."""
     import fmpy
 
     from railfmu.fmus.cosim.system import read_model
 
-    fmu = reference_fmu(model, reference_dir)
+    fmu = reference_fmu(model, reference_dir, fmi_version)
     system = read_system(fmu)
     res = run(system, "jacobi", progress=False)
     compiled, _ = read_model(fmu, "test")
     theirs = fmpy.simulate_fmu(str(compiled), fmi_type="CoSimulation")
-    assert len(res.data) == len(theirs) > 100
+    assert len(res.data) == len(theirs) > (100 if model != "Feedthrough" else 20)
+    assert len(res.columns) >= 2
     for j, col in enumerate(res.columns):
         name = "time" if col == "time" else col.split(".", 1)[1]
         np.testing.assert_array_equal(res.data[:, j], theirs[name].astype(float), err_msg=col)
+    if model == "Feedthrough":
+        # FMI 3.0 carries an Enumeration as an Int64: set by item name, recorded, under both masters
+        for master in ("jacobi", "gauss-seidel"):
+            system = read_system(fmu, overrides={"Feedthrough": {"Enumeration_input": "Option 2",
+                                                                 "Float64_continuous_input": "3"}})
+            res = run(system, master, progress=False)
+            last = dict(zip(res.columns, res.data[-1]))
+            assert last["Feedthrough.Enumeration_output"] == 2 and last["Feedthrough.Float64_continuous_output"] == 3
 
 
 def test_railfmu_run_a_single_fmu_on_the_command_line(reference_dir, tmp_path):
@@ -346,3 +378,36 @@ def test_an_enumeration_signal_is_connected_and_recorded(reference_dir, tmp_path
     system = read_system(tmp_path, step_size=0.01, overrides={"a": {"Int32_input": "2"}})
     system.record = ["b.Enumeration_output"]
     assert run(system, "jacobi", progress=False).data[-1, 1] == 2
+
+
+@pytest.mark.parametrize("case, h0", [("vico/bouncingBall", 2.0), ("vico/bouncingBall/external_ssv", 5.0)])
+def test_vico_bouncing_ball_equals_fmpy(case, h0):
+    """Vico's FMI 1.0 BouncingBall SSPs (Vico's step annotation, 10 ms; h bound inline or in an
+    .ssv): every sample equals ``fmpy.simulate_fmu`` from the same start height (Vico itself
+    is a Java tool, not run here); the ball first lands at sqrt(2 h0 / 9.81)."""
+    import fmpy
+
+    system = read_system(SSPS[case])
+    assert system.step_size == 0.01 and system.step_size_from.startswith("the com.github.ntnu-ihb.vico annotation")
+    system.record = ["bouncingBall.h", "bouncingBall.v"]
+    res = run(system, "jacobi", progress=False)
+    theirs = fmpy.simulate_fmu(str(system.components[0].fmu), start_values={"h": h0}, stop_time=10.0,
+                               output_interval=0.01, step_size=0.01, fmi_type="CoSimulation")
+    assert len(res.data) == len(theirs) == 1001
+    for j, name in enumerate(["time", "h", "v"]):
+        np.testing.assert_array_equal(res.data[:, j], theirs[name], err_msg=name)
+    t, v = res.data[:, 0], res.data[:, 2]
+    first_bounce = t[np.argmax(v > 0)]
+    assert first_bounce == pytest.approx(np.sqrt(2 * h0 / 9.81), abs=0.02)  # the FMU's Euler steps, 10 ms rows
+
+
+def test_an_fmu_fmpy_validation_rejects_is_read_with_one_warning(tmp_path):
+    """OSP's DP ship: DPController.fmu repeats three variable names, which FMPy's
+    validation rejects; the FMU is read without it, one warning line names the problem."""
+    res = subprocess.run([sys.executable, "-m", "railfmu.experiments.engine.cli", "run", "-q",
+                          str(SSPS["vico/dp-ship"]), "--stop-time", "0.2", "--out", str(tmp_path / "out")],
+                         capture_output=True, text=True)
+    assert res.returncode == 0 and "Traceback" not in res.stderr, res.stderr
+    lines = [line for line in res.stderr.splitlines() if "validation" in line]
+    assert len(lines) == 1 and "DPController.fmu" in lines[0] and '"iex"' in lines[0] and "not unique" in lines[0], lines
+    assert len((tmp_path / "out" / "signals.csv").read_text().splitlines()) == 1 + 6  # 0.2 s at 0.04 s

@@ -287,6 +287,10 @@ class _Fmu:
             names = {"Real": "Float64", "Integer": "Int32", "Boolean": "Boolean"}
             self.get = {t: with_n(bind(f"fmi3Get{names[t]}", *array, ctypes.c_size_t)) for t in _C_TYPES}
             self.set = {t: with_n(bind(f"fmi3Set{names[t]}", *array, ctypes.c_size_t)) for t in _C_TYPES}
+            # FMI 3.0 carries an Enumeration as an Int64 (FMI 1.0 and 2.0 as an Integer)
+            self.get["Enumeration"] = with_n(bind("fmi3GetInt64", *array, ctypes.c_size_t))
+            self.set["Enumeration"] = with_n(bind("fmi3SetInt64", *array, ctypes.c_size_t))
+            self.ctype["Enumeration"] = ctypes.c_int64
             self._do_step3 = bind("fmi3DoStep", ctypes.c_double, ctypes.c_double, ctypes.c_bool,
                                   *[ctypes.c_void_p] * 4)
             self._flags = [ctypes.c_bool() for _ in range(3)]
@@ -354,7 +358,11 @@ class _Link:
 def _links(conns: list[Connection], fmus: dict[str, _Fmu]) -> list[_Link]:
     """Connections grouped into links (types checked by :func:`check_system`)."""
     def kind(c: Connection) -> str:
-        return carried_type(fmus[c.src].slave.var(c.src_var).type)
+        src, dst = fmus[c.src], fmus[c.dst]
+        t = src.slave.var(c.src_var).type
+        if t == "Enumeration" and src.version == dst.version == 3 and dst.slave.var(c.dst_var).type == t:
+            return t  # fmi3GetInt64 -> fmi3SetInt64
+        return carried_type(t)
 
     groups: list[list[Connection]] = []
     for c in conns:
@@ -383,7 +391,7 @@ class _Sampler:
         for col, signal in enumerate(record, start=1):
             comp, v = system.signal(signal, "recorded signal")
             fmu = fmus[comp.name]
-            t = carried_type(v.type)
+            t = "Enumeration" if fmu.version == 3 and v.type == "Enumeration" else carried_type(v.type)
             if runs and runs[-1][0] is fmu and runs[-1][1] == t and runs[-1][3][-1] == col - 1:
                 runs[-1][2].append(v.valueReference)
                 runs[-1][3].append(col)

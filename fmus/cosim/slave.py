@@ -59,7 +59,8 @@ FMI2_TERMINATED = 3  # fmi2StatusKind fmi2Terminated, for fmi2GetBooleanStatus
 FMI_VERSIONS = {"1.0": 1, "2.0": 2, "3.0": 3}
 # FMI 3 types under the FMI 2 name the rest of railfmu uses; the FMI 3 name back
 _FMI2_NAME = {"Float64": "Real", "Int32": "Integer"}
-FMI3_NAME = {"Real": "Float64", "Integer": "Int32", "Boolean": "Boolean", "String": "String"}
+FMI3_NAME = {"Real": "Float64", "Integer": "Int32", "Boolean": "Boolean", "String": "String",
+             "Enumeration": "Int64"}  # FMI 3.0 carries an Enumeration as an Int64
 
 
 def fmi_version(md) -> int | None:
@@ -243,6 +244,7 @@ class Slave:
         f = self.fmu
         if self.version == 3 and v.type in FMI3_NAME:
             setter, conv = {"Real": (f.setFloat64, float), "Integer": (f.setInt32, int),
+                            "Enumeration": (f.setInt64, int),
                             "Boolean": (f.setBoolean, bool), "String": (f.setString, str)}[v.type]
         else:
             setter, conv = {"Real": (f.setReal, float), "Integer": (f.setInteger, int),
@@ -254,8 +256,8 @@ class Slave:
         v = self.var(name)
         f = self.fmu
         if self.version == 3 and v.type in FMI3_NAME:
-            getter = {"Real": f.getFloat64, "Integer": f.getInt32, "Boolean": f.getBoolean,
-                      "String": f.getString}[v.type]
+            getter = {"Real": f.getFloat64, "Integer": f.getInt32, "Enumeration": f.getInt64,
+                      "Boolean": f.getBoolean, "String": f.getString}[v.type]
         else:
             getter = {"Real": f.getReal, "Integer": f.getInteger, "Enumeration": f.getInteger,
                       "Boolean": f.getBoolean, "String": f.getString}[v.type]

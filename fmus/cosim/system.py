@@ -15,6 +15,7 @@ import hashlib
 import math
 import os
 import shutil
+import sys
 import tempfile
 import zipfile
 from dataclasses import dataclass, field
@@ -234,7 +235,11 @@ def _read_model(fmu: Path, where: str):
     try:
         md = read_model_description(str(fmu))
     except Exception as exc:  # noqa: BLE001 - fmpy raises anything from BadZipFile to ValidationError
-        raise UserError(f"{where}: cannot read {fmu.name}: {' '.join(str(exc).split())}") from None
+        md = _unvalidated(fmu, exc)
+        if md is None:
+            raise UserError(f"{where}: cannot read {fmu.name}: {' '.join(str(exc).split())}") from None
+        print(f"railfmu: warning: {where}: {fmu.name}: {_validation_problems(exc)}; read without FMPy's "
+              "validation (a repeated variable name means the last variable of that name)", file=sys.stderr)
     from railfmu.fmus.cosim.slave import fmi2_types, fmi_version
 
     if fmi_version(md) is None or md.coSimulation is None:
@@ -252,13 +257,33 @@ def _read_model(fmu: Path, where: str):
     return _compiled(fmu, where), md
 
 
+def _unvalidated(fmu: Path, exc: Exception):
+    """The model description without FMPy's validation when only the validation failed (an FMU
+    that repeats a variable name runs all the same), else None."""
+    from fmpy import read_model_description
+    from fmpy.model_description import ValidationError
+
+    if not isinstance(exc, ValidationError):
+        return None
+    try:
+        return read_model_description(str(fmu), validate=False)
+    except Exception:  # noqa: BLE001 - unreadable without validation too: the first error stands
+        return None
+
+
+def _validation_problems(exc: Exception) -> str:
+    problems = [" ".join(p.split()) for p in getattr(exc, "problems", [])] or [" ".join(str(exc).split())]
+    shown = "; ".join(problems[:3]) + (f"; and {len(problems) - 3} more" if len(problems) > 3 else "")
+    return f"modelDescription.xml fails FMPy's validation ({shown})"
+
+
 def _compiled(fmu: Path, where: str) -> Path:
     """A copy of ``fmu`` with a binary for this platform built from its ``sources/`` (cached by
     the FMU's bytes)."""
     from fmpy.build import build_platform_binary
 
     # the FMU's bytes and how it is compiled (a copy built before the aliases of _unprefixed differs)
-    key = hashlib.sha256(fmu.read_bytes() + b"unprefixed aliases").hexdigest()[:20]
+    key = hashlib.sha256(fmu.read_bytes() + b"unprefixed aliases, FMI 2 and 3").hexdigest()[:20]
     from railfmu.fmus.cache import cache_root
 
     out = cache_root() / "compiled" / key / fmu.name  # with the built FMUs ($RAILFMU_CACHE)
@@ -299,41 +324,33 @@ def _compiled(fmu: Path, where: str) -> Path:
     return out
 
 
-FMI2_FUNCTIONS = (
-    "GetTypesPlatform GetVersion SetDebugLogging Instantiate FreeInstance SetupExperiment "
-    "EnterInitializationMode ExitInitializationMode Terminate Reset GetReal GetInteger GetBoolean "
-    "GetString SetReal SetInteger SetBoolean SetString GetFMUstate SetFMUstate FreeFMUstate "
-    "SerializedFMUstateSize SerializeFMUstate DeSerializeFMUstate GetDirectionalDerivative "
-    "EnterEventMode NewDiscreteStates EnterContinuousTimeMode CompletedIntegratorStep SetTime "
-    "SetContinuousStates GetDerivatives GetEventIndicators GetContinuousStates "
-    "GetNominalsOfContinuousStates SetRealInputDerivatives GetRealOutputDerivatives DoStep "
-    "CancelStep GetStatus GetRealStatus GetIntegerStatus GetBooleanStatus GetStringStatus").split()
-
-
 def _unprefixed(unzipped: Path) -> str:
-    """FMI 2.0 source code names its functions ``<modelIdentifier>_fmi2DoStep`` (for static
-    linking) unless the FMU's own build says otherwise; a binary built from such sources
-    exports no ``fmi2DoStep``, which every importer looks for. Linker flags that add the
-    standard names as aliases of the prefixed ones (GNU ld ``--defsym``), or "" when the
-    binary needs none (or ``nm`` cannot tell)."""
+    """FMI 2.0 and 3.0 source code names its functions ``<modelIdentifier>_fmi2DoStep`` (for
+    static linking) unless the FMU's own build says otherwise (the Reference-FMUs' FMI 3
+    buildDescription.xml does not); a binary built from such sources exports no
+    ``fmi2DoStep``, which every importer looks for. Linker flags that add the standard names as
+    aliases of the prefixed ones (GNU ld ``--defsym``), or "" when the binary needs none (or
+    ``nm`` cannot tell)."""
     import subprocess
 
     from fmpy import read_model_description
 
     md = read_model_description(str(unzipped), validate=False)
-    if md.fmiVersion != "2.0" or md.coSimulation is None:
+    if md.fmiVersion not in ("2.0", "3.0") or md.coSimulation is None:
         return ""
+    fmi = "fmi2" if md.fmiVersion == "2.0" else "fmi3"
     mid = md.coSimulation.modelIdentifier
-    binary = unzipped / "binaries" / _platform() / f"{mid}.so"
+    binary = unzipped / "binaries" / _platform(int(md.fmiVersion[0])) / f"{mid}.so"
     try:
         out = subprocess.run(["nm", "-D", "--defined-only", str(binary)], capture_output=True, text=True,
                              timeout=60).stdout
     except (OSError, subprocess.SubprocessError):
         return ""
     names = {line.split()[-1] for line in out.splitlines() if line.strip()}
-    if "fmi2DoStep" in names or f"{mid}_fmi2DoStep" not in names:
+    if f"{fmi}DoStep" in names or f"{mid}_{fmi}DoStep" not in names:
         return ""
-    return " ".join(f"-Wl,--defsym=fmi2{f}={mid}_fmi2{f}" for f in FMI2_FUNCTIONS if f"{mid}_fmi2{f}" in names)
+    return " ".join(f"-Wl,--defsym={n.removeprefix(mid + '_')}={n}" for n in sorted(names)
+                    if n.startswith(f"{mid}_{fmi}"))
 
 
 # -- the one set of checks ---------------------------------------------------------------------

@@ -127,6 +127,8 @@ def why_not_settable(var) -> str | None:
         return "is a calculated parameter"
     if var.causality in ("parameter", "input") or var.initial in ("exact", "approx"):
         return None
+    if var.initial is None and var.start is not None and var.causality != "input":
+        return None  # FMI 1.0 has no initial: a start value is set before fmiInitializeSlave
     return f"is an {var.causality} computed by the FMU (initial={var.initial or 'calculated'!r})"
 
 

@@ -3,7 +3,7 @@
 :func:`read_system` applies what FMPy's own SSP support skips: parameter bindings in the SSD
 (inline and ``.ssv``), ``.ssm`` mappings, ``ssc:LinearTransformation``, unit checks and
 conversions, ``ssd:DefaultExperiment`` and a fixed step size (``--step-size``, else our or the
-OSP annotation, else OMSimulator's, else the smallest DefaultExperiment stepSize of the
+OSP or Vico annotation, else OMSimulator's, else the smallest DefaultExperiment stepSize of the
 FMUs). Nested systems are flattened and system connectors become parameters of the run
 (:mod:`railfmu.fmus.ssp.nested`); a single ``.fmu`` is a system of its own
 (:mod:`railfmu.fmus.ssp.single_fmu`). Parameter
@@ -102,6 +102,7 @@ RESOURCES = "resources/"  # SSP 1.0: an SSP's own files (FMUs, and any file a pa
 PARAMETERS = "org.railfmu.parameters"
 RECORDER, OBSERVERS, EXPERIMENT, OSP = ("org.railfmu.recorder", "org.railfmu.observers",
                                         "org.railfmu.experiment", "com.opensimulationplatform")
+VICO = "com.github.ntnu-ihb.vico"
 #: the study whose metrics and figures a run gets: ``<rf:Study name="..."/>`` (System.study)
 STUDY = "org.railfmu.study"
 OMS = "org.openmodelica"  # OMSimulator's annotation type
@@ -827,7 +828,7 @@ class _Reader:
             raise UserError(f"{self.file}: no stop time: ssd:DefaultExperiment has no stopTime "
                             "and none was given (--stop-time)")
         if step is None:
-            raise UserError(f"{self.file}: no step size: no {EXPERIMENT} (rf:FixedStep) or {OSP} annotation "
+            raise UserError(f"{self.file}: no step size: no {EXPERIMENT} (rf:FixedStep), {OSP} or {VICO} annotation "
                             "on ssd:DefaultExperiment, no DefaultExperiment stepSize in any FMU, and no "
                             "--step-size")
         stop, step = float(stop), float(step)
@@ -862,6 +863,13 @@ class _Reader:
             fs = a.find("osp:Algorithm/osp:FixedStepAlgorithm", NS) if a is not None else None
             if fs is not None:
                 return self._number(fs, "baseStepSize"), f"the {OSP} annotation"
+            # Vico's (its files use two namespaces and two element names for it)
+            a = self._annotation(de, VICO)
+            fs = next((el for el in (a.iter() if a is not None else [])
+                       if isinstance(el.tag, str) and etree.QName(el).localname in ("FixedStepAlgorithm", "FixedStepMaster")
+                       and el.get("baseStepSize") is not None), None)
+            if fs is not None:
+                return self._number(fs, "baseStepSize"), f"the {VICO} annotation"
         for systems in ([self.system], self.flat.systems):
             steps = []
             for el in systems:

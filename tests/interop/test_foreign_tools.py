@@ -128,3 +128,91 @@ def test_libcosim_demo_agrees_with_libcosim(tmp_path):
             worst[f"{comp}.{var}"] = deviation(np.array([x0[0], *x]), ref)
     print(f"libcosim demo: worst deviation from libcosim {max(worst.values()):.1e} of range ({len(worst)} signals)")
     assert len(worst) >= 2 and max(worst.values()) <= RTOL_CRANE, sorted(worst.items(), key=lambda kv: -kv[1])[:5]
+
+
+def test_libcosim_fmi1_linear_transformation_agrees_with_libcosim():
+    """libcosim's FMI 1.0 example (ViProMa's identity FMU, a LinearTransformation on the
+    connection): every row of railfmu's Jacobi master equals libcosim's. libcosim reads the
+    first of the component's two .ssv files as its default parameter set (realIn = 2), railfmu
+    applies both in order (the later, 4, wins; tests/test_foreign.py): here railfmu is given 2."""
+    pytest.importorskip("libcosimpy", reason="libcosimpy is not installed")
+    from libcosimpy.CosimEnums import CosimVariableType
+    from libcosimpy.CosimExecution import CosimExecution
+    from libcosimpy.CosimLogging import CosimLogLevel, log_output_level
+    from libcosimpy.CosimObserver import CosimObserver
+
+    from railfmu.fmus.cosim.masters import run
+    from railfmu.fmus.ssp import read_system
+
+    case = SSPS["libcosim/linear_transformation"]
+    stop, h = 0.1, 1e-3  # s: the SSD gives neither; libcosim's own test steps 1 ms
+    system = read_system(case, stop_time=stop, step_size=h, overrides={"identity1": {"realIn": "2"}})
+    signals = ["identity1.realOut", "identity2.realIn", "identity2.realOut"]
+    system.record = signals
+    ours = run(system, "jacobi", progress=False)
+    n = system.n_steps
+
+    log_output_level(CosimLogLevel.ERROR)
+    execution = CosimExecution.from_ssp_file(str(case), step_size=round(h * 1e9))
+    index = {s.name.decode(): s.index for s in execution.slave_infos()}
+    vr = {v.name.decode(): v.reference for v in execution.slave_variables(index["identity1"])}
+    observer = CosimObserver.create_time_series(buffer_size=n + 10)
+    assert execution.add_observer(observer)
+    for signal in signals:
+        comp, var = signal.split(".")
+        assert observer.start_time_series(index[comp], vr[var], CosimVariableType.REAL)
+    assert execution.simulate_until(round(stop * 1e9))
+    for j, signal in enumerate(signals, start=1):
+        comp, var = signal.split(".")
+        _, _, x = observer.time_series_real_samples(index[comp], vr[var], from_step=1, sample_count=n)
+        # libcosim's samples after each step against ours from the second row: the same doubles
+        np.testing.assert_array_equal(np.array(x), ours.data[1:, j], err_msg=signal)
+    # 2 through factor 1.3 and offset 50
+    assert ours.data[-1, 1:].tolist() == [2.0, 52.6, 52.6]
+
+
+def test_osp_dp_ship_agrees_with_libcosim_until_its_controller_acts():
+    """OSP's dynamic-positioning ship (Vico's test data: FMI 1.0 and 2.0 FMUs, an OSP step
+    annotation of 40 ms): every Real output of railfmu's Jacobi master equals libcosim's to
+    1e-9 of its range for the first 1.96 s (48 steps). NOT agreeing after: from 2 s libcosim's
+    DP controller (an FMI 1.0 FMU) acts (ControlMz -263 at 2 s) while railfmu's stays at 0: the
+    FMU stops sampling when its outputs are read between setting its inputs and its next
+    fmiDoStep, which railfmu does to record the row at t and libcosim does not (an open
+    finding, docs/interoperability.md; not a tolerance)."""
+    pytest.importorskip("libcosimpy", reason="libcosimpy is not installed")
+    from libcosimpy.CosimEnums import CosimVariableType
+    from libcosimpy.CosimExecution import CosimExecution
+    from libcosimpy.CosimLogging import CosimLogLevel, log_output_level
+    from libcosimpy.CosimObserver import CosimObserver
+
+    from railfmu.fmus.cosim.masters import run
+    from railfmu.fmus.ssp import read_system
+
+    case = SSPS["vico/dp-ship"]
+    system = read_system(case, stop_time=1.96)
+    system.record = [f"{c.name}.{v.name}" for c in system.components for v in c.md.modelVariables
+                     if v.causality == "output" and v.type == "Real"]
+    ours = run(system, "jacobi", progress=False)
+    n, step_ns = system.n_steps, round(system.step_size * 1e9)
+    assert n == 49
+
+    log_output_level(CosimLogLevel.ERROR)
+    execution = CosimExecution.from_ssp_file(str(case))
+    index = {s.name.decode(): s.index for s in execution.slave_infos()}
+    observer = CosimObserver.create_time_series(buffer_size=n + 10)
+    assert execution.add_observer(observer)
+    compared = []
+    for comp in system.components:
+        for v in comp.md.modelVariables:
+            if v.causality == "output" and v.type == "Real":
+                assert observer.start_time_series(index[comp.name], v.valueReference, CosimVariableType.REAL)
+                compared.append((comp.name, v.name, v.valueReference))
+    assert execution.simulate_until(n * step_ns)
+    worst = {}
+    for comp, var, vr in compared:
+        _, _, x = observer.time_series_real_samples(index[comp], vr, from_step=1, sample_count=n)
+        ref = ours.data[1:, ours.columns.index(f"{comp}.{var}")]
+        if np.ptp(ref) > 1e-12:
+            worst[f"{comp}.{var}"] = deviation(np.array(x), ref)
+    print(f"DP ship: worst deviation from libcosim {max(worst.values()):.1e} of range ({len(worst)} signals)")
+    assert len(worst) >= 5 and max(worst.values()) <= RTOL_ALGEBRAIC, sorted(worst.items(), key=lambda kv: -kv[1])[:5]
