@@ -27,6 +27,8 @@ LABELS_KEY = "railfmu:axes"
 DISPLAY = {("m", "mm"): 1e3, ("m/s", "mm/s"): 1e3, ("m/s", "km/h"): 3.6, ("rad", "deg"): 180 / math.pi,
            ("rad/s", "deg/s"): 180 / math.pi, ("N/m", "kN/m"): 1e-3}
 NO_UNIT = ("-", "?", "", None)
+#: PNG resolution
+DPI = 110
 
 
 def _pyplot():
@@ -119,6 +121,7 @@ def save(fig, path: Path) -> None:
     and y labels, legend entries and whether the legend covers the axis (see
     :func:`figure_labels`). The extents come from the canvas's renderer without a draw: the
     figure is drawn once, by ``savefig``."""
+    fig.set_dpi(DPI)  # the renderer at the PNG's resolution, as savefig's own
     renderer = fig.canvas.get_renderer()
     axes = []
     for ax in fig.axes:
@@ -127,7 +130,9 @@ def save(fig, path: Path) -> None:
                      "legend": [t.get_text() for t in leg.get_texts()] if leg else [],
                      "legend_over_data": bool(leg and _overlaps(leg.get_window_extent(renderer),
                                                                 ax.get_window_extent(renderer)))})
-    fig.savefig(path, dpi=110, bbox_inches="tight", metadata={LABELS_KEY: json.dumps(axes)})
+    # savefig's "tight" box from the same renderer, without the extra draw "tight" makes to find it
+    box = fig.get_tightbbox(renderer).padded(0.1)  # savefig.pad_inches
+    fig.savefig(path, dpi=DPI, bbox_inches=box, metadata={LABELS_KEY: json.dumps(axes)})
 
 
 #: columns of a figure's curve envelope (:func:`envelope`): above the ~1100 pixel columns of the
@@ -181,6 +186,7 @@ def figure(out: Path, fname: str, title: str, x: np.ndarray, x_label: str, axes:
     outside the data."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
+    from matplotlib.layout_engine import TightLayoutEngine
 
     # a bare Agg figure: no pyplot (its import and figure manager) for a PNG
     fig = Figure(figsize=(width, max(3.6, height * len(axes))))
@@ -202,7 +208,9 @@ def figure(out: Path, fname: str, title: str, x: np.ndarray, x_label: str, axes:
         ax.grid(alpha=0.3)
     ax_grid[0, 0].set_title(title)
     ax_grid[-1, 0].set_xlabel(x_label)
-    fig.tight_layout()
+    # fig.tight_layout()'s layout, run once without leaving a layout engine on the figure (with one,
+    # savefig draws the figure twice)
+    TightLayoutEngine().execute(fig)
     save(fig, out / fname)
     return fname
 
