@@ -132,7 +132,9 @@ def save(fig, path: Path) -> None:
                                                                 ax.get_window_extent(renderer)))})
     # savefig's "tight" box from the same renderer, without the extra draw "tight" makes to find it
     box = fig.get_tightbbox(renderer).padded(0.1)  # savefig.pad_inches
-    fig.savefig(path, dpi=DPI, bbox_inches=box, metadata={LABELS_KEY: json.dumps(axes)})
+    # zlib level 3: a third less time to encode than PIL's default 6, the same pixels in a file 10-20 % larger
+    fig.savefig(path, dpi=DPI, bbox_inches=box, metadata={LABELS_KEY: json.dumps(axes)},
+                pil_kwargs={"compress_level": 3})
 
 
 #: columns of a figure's curve envelope (:func:`envelope`): above the ~1100 pixel columns of the
