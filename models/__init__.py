@@ -4,10 +4,21 @@ Imports numpy/scipy/sympy only. Each model is the single source for its FMU (fmu
 any estimator's design model (estimators/).
 """
 
-from railfmu.models.base import Input, Model, Output, Parameter, State, Variable
+from __future__ import annotations
+
+_BASE = ("Input", "Model", "Output", "Parameter", "State", "Variable")
 
 
-def all_models() -> list[Model]:
+def __getattr__(name: str):
+    # lazily: ``railfmu.models.errors`` or ``earth`` must not pull in sympy through ``base``
+    if name in _BASE:
+        from railfmu.models import base
+
+        return getattr(base, name)
+    raise AttributeError(f"module 'railfmu.models' has no attribute {name!r}")
+
+
+def all_models() -> list:
     """Every model that is built into an FMU, in build order."""
     from railfmu.models.vehicle.coach_vertical import COACH_VERTICAL
     from railfmu.models.train.driver import DRIVER

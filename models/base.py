@@ -292,22 +292,57 @@ class Model:
         start values (overridden by ``u0``; an input such as a stiffness is an operating
         point, not a small signal), with the given parameters; B and D columns follow
         ``self.inputs``, C and D rows ``self.outputs``."""
-        x = [s.symbol for s in self.states]
-        u = [v.symbol for v in self.inputs]
-        cache = self.__dict__.setdefault("_compiled", {})
-        if "jacobians" not in cache:  # derived once per process
-            f = sp.Matrix(self.derivative_exprs())
-            g = sp.Matrix([o.expr for o in self.outputs])
-            cache["jacobians"] = (f.jacobian(x), f.jacobian(u), g.jacobian(x), g.jacobian(u))
-            cache["linearized"] = {}
         pv = {**self.default_parameters(), **(p or {})}
         uv = {**{v.name: v.start for v in self.inputs}, **(u0 or {})}
         # an estimator built per run (a Monte Carlo member) gets the same matrices without the cost of
         # substitution; evaluated by sympy as before, so the numbers are bit for bit the same
         key = (tuple(sorted(pv.items())), tuple(sorted(uv.items())))
-        memo = cache["linearized"]
+        memo = self.__dict__.setdefault("_compiled", {}).setdefault("linearized", {})
         if key not in memo:
-            subs = {q.symbol: pv[q.name] for q in self.parameters if q.type != "String"}
-            zero = {**{s: 0 for s in x}, **{v.symbol: uv[v.name] for v in self.inputs}}
-            memo[key] = tuple(np.array(m.subs(subs).subs(zero), dtype=float) for m in cache["jacobians"])
+            memo[key] = self._linearized_on_disk(key)
         return tuple(m.copy() for m in memo[key])
+
+    def _jacobians(self):
+        cache = self.__dict__.setdefault("_compiled", {})
+        if "jacobians" not in cache:  # derived once per process
+            x = [s.symbol for s in self.states]
+            u = [v.symbol for v in self.inputs]
+            f = sp.Matrix(self.derivative_exprs())
+            g = sp.Matrix([o.expr for o in self.outputs])
+            cache["jacobians"] = (f.jacobian(x), f.jacobian(u), g.jacobian(x), g.jacobian(u))
+        return cache["jacobians"]
+
+    def _substituted(self, jacobians, pv, uv):
+        subs = {q.symbol: pv[q.name] for q in self.parameters if q.type != "String"}
+        zero = {**{s.symbol: 0 for s in self.states}, **{v.symbol: uv[v.name] for v in self.inputs}}
+        return tuple(np.array(m.subs(subs).subs(zero), dtype=float) for m in jacobians)
+
+    def _linearized_on_disk(self, key) -> tuple:
+        """(A, B, C, D) for ``key`` from the per-user cache, else substituted and stored; a new process (each
+        ``railfmu run``) then skips the Jacobians' derivation and substitution (~0.5 s for the
+        wheelset). Keyed by the equations' text and the values, so a changed model or
+        parameter is a new entry; the arrays are saved as float64, bit for bit."""
+        import hashlib
+        import os
+        import tempfile
+
+        text = repr((self.identifier, [str(e) for e in self.derivative_exprs()], [str(o.expr) for o in self.outputs],
+                     [s.name for s in self.states], [v.name for v in self.inputs], key))
+        # the cache root of railfmu.fmus.cache (models import nothing of fmus)
+        root = os.environ.get("RAILFMU_CACHE") or Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "railfmu"
+        path = Path(root).expanduser() / "linearized" / f"{hashlib.sha256(text.encode()).hexdigest()[:32]}.npz"
+        try:
+            with np.load(path) as z:
+                return tuple(z[n] for n in "ABCD")
+        except (OSError, KeyError, ValueError):
+            pass
+        mats = self._substituted(self._jacobians(), dict(key[0]), dict(key[1]))
+        try:  # atomically: a parallel run reads a whole file or none
+            path.parent.mkdir(parents=True, exist_ok=True)
+            fd, tmp = tempfile.mkstemp(dir=path.parent, suffix=".npz")
+            with os.fdopen(fd, "wb") as f:
+                np.savez(f, **dict(zip("ABCD", mats)))
+            os.replace(tmp, path)
+        except OSError:  # a read-only cache: derive every time
+            pass
+        return mats

@@ -84,3 +84,24 @@ def test_the_replayed_imu_plots_say_radians_and_metres_per_second(tmp_path, fmu_
     est = pd.read_csv(tmp_path / "estimates.csv")
     sig = pd.read_csv(tmp_path / "signals.csv")
     assert np.degrees(est["ins.latitude"].iloc[0]) == pytest.approx(sig["truth.y_1"].iloc[0], abs=1e-9)
+
+
+def test_a_long_curve_is_drawn_from_its_own_extremes():
+    """The display envelope keeps every column's minimum and maximum, in order, from the data
+    itself: the figure covers the same values with ~4000 of 20,001 points."""
+    from railfmu.experiments.engine.plots import envelope
+
+    x = np.arange(20001) * 1e-3
+    y = np.sin(50 * x) + 0.1 * np.random.default_rng(1).standard_normal(x.size)
+    y[12345] = 7.0  # a spike one sample wide must survive
+    xs, ys = envelope(x, y, columns=2000)
+    assert len(xs) <= 4002 and np.all(np.diff(xs) > 0)
+    assert ys.max() == 7.0 and ys.min() == y.min() and xs[0] == x[0] and xs[-1] == x[-1]
+    idx = np.searchsorted(x, xs)
+    assert np.array_equal(y[idx], ys)  # points of the data, not averages
+    k = 11  # samples per column: ceil(20001 / 2000)
+    for c in range(0, 20001, k):  # every column: its extremes are kept
+        inside = (idx >= c) & (idx < c + k)
+        assert ys[inside].max() == y[c:c + k].max() and ys[inside].min() == y[c:c + k].min()
+    short = np.arange(50.0)
+    assert envelope(short, short)[1] is short

@@ -99,3 +99,27 @@ def test_linearisation_and_modes():
     f_klingel = p["V"] / (2 * math.pi) * math.sqrt(a / (p["r0"] * l))
     least_damped = eig[np.argmin(-eig.real / np.abs(eig))]
     assert abs(least_damped.imag) / (2 * math.pi) == pytest.approx(f_klingel, rel=0.06)
+
+
+def test_a_linearisation_read_back_from_the_cache_is_the_derived_one(tmp_path, monkeypatch):
+    """A new process reads (A, B, C, D) from the per-user cache: bit for bit what sympy's
+    substitution gives; another parameter value is another entry, with its own matrices."""
+    monkeypatch.setenv("RAILFMU_CACHE", str(tmp_path))
+    memo = WHEELSET.__dict__.setdefault("_compiled", {}).setdefault("linearized", {})
+    saved = dict(memo)
+    memo.clear()  # as in a new process
+    try:
+        first = WHEELSET.linearize({"V": 31.0})
+        assert len(list((tmp_path / "linearized").glob("*.npz"))) == 1
+        memo.clear()
+        again = WHEELSET.linearize({"V": 31.0})  # from the file
+        derived = WHEELSET._substituted(WHEELSET._jacobians(), {**WHEELSET.default_parameters(), "V": 31.0},
+                                        {v.name: v.start for v in WHEELSET.inputs})
+        for a, b, c in zip(first, again, derived):
+            assert a.dtype == b.dtype == np.float64 and np.array_equal(a, c) and np.array_equal(b, c)
+        other = WHEELSET.linearize({"V": 15.0})
+        assert len(list((tmp_path / "linearized").glob("*.npz"))) == 2
+        assert not np.array_equal(other[0], first[0])  # the speed is in A (creep forces over V)
+    finally:
+        memo.clear()
+        memo.update(saved)

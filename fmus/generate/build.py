@@ -20,10 +20,14 @@ import zipfile
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
-from railfmu.fmus.cache import cache_root
-from railfmu.models.base import Model
+from typing import TYPE_CHECKING
 
-from railfmu.fmus.generate import codegen
+from railfmu.fmus.cache import cache_root
+
+if TYPE_CHECKING:
+    from railfmu.models.base import Model
+# codegen (sympy) is imported where a model is generated: the up-to-date check of a run whose
+# FMUs are current must not load sympy
 
 HERE = Path(__file__).resolve().parent
 FMUS = HERE.parent
@@ -141,6 +145,8 @@ def generate_sources(model: Model, fmi_version: int = 2) -> tuple[str, dict[str,
         headers = [*FMI_HEADERS, *FMI3_HEADERS]
     for h in headers:
         src[h] = (fmi_header_dir() / h).read_text()
+    from railfmu.fmus.generate import codegen  # sympy: only when a model is generated
+
     src[f"{model.identifier}_variables.c"] = codegen.variables_c(model)
     if model.generated:
         src[f"{model.identifier}_equations.c"] = codegen.equations_c(model)
@@ -305,6 +311,8 @@ def build_fmu(model: Model, out_dir: Path | str | None = None, force: bool = Fal
         recorded_key, _, recorded_guid = key_file.read_text().partition(" ")
         if recorded_key == key and _guid_of_fmu(target) == recorded_guid.strip():
             return target
+    from railfmu.fmus.generate import codegen
+
     guid, src = generate_sources(model, fmi_version)
     # FMI 3: fmi3_runtime.c includes fmi2_runtime.c, which is not compiled on its own
     c_files = sorted(n for n in src if n.endswith(".c") and not (fmi_version == 3 and n == "fmi2_runtime.c"))
@@ -435,6 +443,8 @@ def built_by_railfmu(path: Path | str) -> bool:
     """Whether railfmu generated the FMU (modelDescription generationTool "railfmu")."""
     try:
         from fmpy import read_model_description
+
+        from railfmu.fmus.generate import codegen
 
         return (read_model_description(str(path), validate=False).generationTool or "").split(" ")[0] == codegen.GENERATOR
     except Exception:  # noqa: BLE001 - unreadable: FMPy's validation says why
