@@ -129,7 +129,7 @@ class TrainResistance(Study):
         regime = true_regimes(t, v, f)
         dt = np.r_[np.diff(t), 0.0]
         running = float(dt[regime != 0].sum())
-        ref = reference_features(t, v, f, mass_effective(roles))
+        ref = reference_features(t, v, f, mass_effective(run))
         vc = float(sig[roles["cruise_target"]][0])
         return {
             **{f"r{i}": float(r_true[i]) for i in range(3)},
@@ -153,7 +153,7 @@ class TrainResistance(Study):
         n = len(est["time"])
         fixes = np.flatnonzero(np.asarray(sig[roles["fix"]])[:n] != 0)
         out = {"position": sig[roles["gnss_position"]][fixes], "speed_kmh": sig[roles["gnss_speed"]][fixes] / KMH}
-        m_eff = mass_effective(roles)
+        m_eff = mass_effective(run)
         for name in estimators_of(est):
             if f"{name}.acceleration" not in est or len(fixes) < 2:
                 continue

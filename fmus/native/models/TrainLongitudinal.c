@@ -11,8 +11,12 @@
 
 static double clip(double x, double lo, double hi) { return x < lo ? lo : (x > hi ? hi : x); }
 
+static double mass(const ModelInstance *m) { /* m_tare + load_factor m_load (kg) */
+    return m->r[VR_tare_mass] + m->r[VR_load_factor] * m->r[VR_load_mass];
+}
+
 static double effective_mass(const ModelInstance *m) { /* gamma m (kg) */
-    return m->r[VR_rotating_mass_factor] * (m->r[VR_tare_mass] + m->r[VR_load_mass]);
+    return m->r[VR_rotating_mass_factor] * mass(m);
 }
 
 /* The efforts at speed v (m/s) for the command held over the step: traction force (N) and
@@ -117,6 +121,7 @@ int model_outputs(ModelInstance *m) {
     m->r[VR_gradient] = p->gradient[k];
     m->r[VR_gradient_specific] = gradient_term(m, m->r[VR_s]);
     m->r[VR_speed_limit] = p->limit[k];
+    m->r[VR_mass] = mass(m);
     return 0;
 }
 
