@@ -133,6 +133,7 @@ class TrainResistance(Study):
         vc = float(sig[roles["cruise_target"]][0])
         return {
             **{f"r{i}": float(r_true[i]) for i in range(3)},
+            "mass_kg": float(np.asarray(sig[roles["mass"]])[0]),  # the run's load (a variant may draw it)
             "run_time_s": float(t[-1] - t[0]), "running_time_s": running, "max_power_w": float(roles["max_power"]),
             "top_speed_kmh": float(np.max(v) / KMH),
             "cruise_target_kmh": vc / KMH, "cruise_above_140": float(vc / KMH > 140.0),
