@@ -107,6 +107,11 @@ def test_load_factor_input_sets_the_mass(fmu_dir, tmp_path):
                     assert fmu.get(name) == out[name], (lf, t, name)
         fmu.close()
     assert acc[0.0] > acc[0.37] > acc[1.0]
+    fmu = start(fmu_dir, {"line_file": str(flat)})
+    fmu.set("load_factor", -0.1)
+    with pytest.raises(FMUError, match="load_factor"):
+        fmu.do_step(0.0, 1.0)
+    fmu.close()
 
 
 def test_terminal_speed_where_power_limited_traction_equals_resistance(fmu_dir, tmp_path):

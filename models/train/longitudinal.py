@@ -217,6 +217,8 @@ class Train:
         q = h / self.p["integrator_step"] - 1e-9
         n = max(int(np.ceil(q)) if q > 0 else 0, 1)
         dt = h / n
+        if not self.u["load_factor"] >= 0:
+            raise ValueError(f"input load_factor = {self.u['load_factor']:g} must be >= 0")
         if self.u["set_state"]:
             self.s, self.v = float(self.u["s_set"]), float(self.u["v_set"])
         x = [self.s, self.v]

@@ -58,6 +58,15 @@ static double accel(ModelInstance *m, double s, double v) {
     return r > 0 ? r : 0.0;
 }
 
+/* the load factor is an input (no parameter check at a set): refused where it is read */
+static int check_load_factor(ModelInstance *m) {
+    if (!(m->r[VR_load_factor] >= 0)) {
+        model_error(m, "input load_factor = %g must be >= 0", m->r[VR_load_factor]);
+        return 1;
+    }
+    return 0;
+}
+
 int model_check_parameters(ModelInstance *m) {
     static const fmi2ValueReference pos[] = {VR_tare_mass, VR_rotating_mass_factor,
                                              VR_max_traction_force, VR_max_power,
@@ -73,7 +82,7 @@ int model_check_parameters(ModelInstance *m) {
         model_error(m, "parameter load_mass = %g must be >= 0", m->r[VR_load_mass]);
         return 1;
     }
-    return 0;
+    return check_load_factor(m);
 }
 
 static int load(ModelInstance *m) {
@@ -87,6 +96,7 @@ int model_initialize(ModelInstance *m) { return load(m); }
 /* set_state: the step starts from (s_set, v_set), a process model's sigma point (the runtime
    refuses non-finite inputs when they are set) */
 int model_step_begin(ModelInstance *m) {
+    if (check_load_factor(m) != 0) return 1;
     if (m->b[VRB_set_state]) {
         m->r[VR_s] = m->r[VR_s_set];
         m->r[VR_v] = m->r[VR_v_set];
