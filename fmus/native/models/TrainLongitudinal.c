@@ -58,7 +58,7 @@ static double accel(ModelInstance *m, double s, double v) {
     return r > 0 ? r : 0.0;
 }
 
-/* the load factor is an input (no parameter check at a set): refused where it is read */
+/* the load factor is an input (no parameter check at a set): a step refuses a negative one */
 static int check_load_factor(ModelInstance *m) {
     if (!(m->r[VR_load_factor] >= 0)) {
         model_error(m, "input load_factor = %g must be >= 0", m->r[VR_load_factor]);
@@ -82,7 +82,7 @@ int model_check_parameters(ModelInstance *m) {
         model_error(m, "parameter load_mass = %g must be >= 0", m->r[VR_load_mass]);
         return 1;
     }
-    return check_load_factor(m);
+    return 0;
 }
 
 static int load(ModelInstance *m) {
