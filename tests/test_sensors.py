@@ -163,6 +163,27 @@ def test_log_uniform_distribution_fmu_equals_python(sensors_fmu):
     assert abs(x.mean()) < 0.03 and abs(x.std() - math.log(2.0) / math.sqrt(3.0)) < 0.02
 
 
+def test_uniform_distribution_fmu_equals_python(sensors_fmu):
+    """distribution_i = 2: y_i = gain_i u_i + bias_i + sigma_i (2 u2 - 1), the C equal to the
+    twin bit for bit, every draw within [bias - sigma, bias + sigma), uniform (5000 draws: mean
+    within 4 standard errors sigma / sqrt(3 n) of bias, Kolmogorov-Smirnov p > 0.001)."""
+    params = {**SIGMAS, **{f"bias_{i}": 0.1 * i for i in CH}, "sigma_7": 0.5, "bias_7": 0.5,
+              "distribution_7": 2, "seed": 11, "sample_period": 1e-3}
+    t = np.arange(5000) * 1e-3
+    u = np.array([np.cos(2 * np.pi * (i + 1) * t) for i in range(N_CHANNELS)]).T
+    u[:, 6] = 0.0  # channel 7 a drawn parameter: no input
+    with Slave(sensors_fmu, "s") as s:
+        s.initialize(0.0, None, params)
+        fmu = _drive(s, t, u)
+    twin = SensorNoise(params).outputs(t, 1e-3, {f"u_{i}": u[:, i - 1] for i in CH})
+    for i in CH:
+        assert np.array_equal(fmu[:, i - 1], twin[f"y_{i}"]), i
+    x = fmu[:, 6]
+    assert x.min() >= 0.0 and x.max() < 1.0
+    assert abs(x.mean() - 0.5) < 4 * 0.5 / math.sqrt(3 * len(x))
+    assert stats.kstest(x, "uniform").pvalue > 1e-3
+
+
 def test_noise_statistics(sensors_fmu):
     """20000 samples per channel (20 s at 1 kHz): zero mean and std sigma within 3 standard
     errors, lag-1 autocorrelation |r| < 0.03 (its standard error is 0.007), channels

@@ -75,6 +75,45 @@ def test_fmu_equals_its_python_twin(fmu_dir):
     fmu.close()
 
 
+def test_load_factor_input_sets_the_mass(fmu_dir, tmp_path):
+    """The load_factor input (start 1: the load_mass parameter, so nothing changes unconnected):
+    the twin equals the FMU bit for bit at a drawn load, the mass output is m_tare + l m_load,
+    and from rest on a flat line at full traction the acceleration is F_max / (gamma m) - r0
+    (eq. 1 below the transition speed), lower for the heavier train."""
+    flat = line(tmp_path)
+    fmu0 = start(fmu_dir, {"line_file": str(flat)})
+    assert fmu0.get("load_factor") == 1.0 and fmu0.get("mass") == TARE_MASS + LOAD_MASS
+    fmu0.close()
+    acc = {}
+    for lf in (0.0, 0.37, 1.0):
+        fmu = start(fmu_dir, {"line_file": str(flat), "load_mass": 45600.0}, {"load_factor": lf, "command": 1.0})
+        twin = Train({"load_mass": 45600.0}, line=flat)
+        twin.u.update(load_factor=lf, command=1.0)
+        m = TARE_MASS + lf * 45600.0
+        assert fmu.get("mass") == m and twin.outputs()["mass"] == m
+        # at rest r0 holds the train; the net traction starts it
+        acc[lf] = fmu.get("acceleration")
+        assert acc[lf] == pytest.approx(MAX_TRACTION_FORCE / (GAMMA * m) - R0, rel=1e-12)
+        t = 0.0
+        for u, n in [(1.0, 120), (0.0, 60), (-0.6, 40)]:
+            for _ in range(n):
+                fmu.set("command", u)
+                twin.u["command"] = u
+                fmu.do_step(t, 1.0)
+                twin.step(1.0)
+                t += 1.0
+                out = twin.outputs()
+                for name in ("s", "v", "acceleration", "effort", "effort_specific", "mass"):
+                    assert fmu.get(name) == out[name], (lf, t, name)
+        fmu.close()
+    assert acc[0.0] > acc[0.37] > acc[1.0]
+    fmu = start(fmu_dir, {"line_file": str(flat)})
+    fmu.set("load_factor", -0.1)
+    with pytest.raises(FMUError, match="load_factor"):
+        fmu.do_step(0.0, 1.0)
+    fmu.close()
+
+
 def test_terminal_speed_where_power_limited_traction_equals_resistance(fmu_dir, tmp_path):
     """P/v = gamma m r(v) on the flat: the train started at that speed stays there."""
     f = lambda v: MAX_POWER / v / M_EFF - (R0 + R1 * v + R2 * v * v)  # noqa: E731

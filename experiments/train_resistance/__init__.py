@@ -129,10 +129,11 @@ class TrainResistance(Study):
         regime = true_regimes(t, v, f)
         dt = np.r_[np.diff(t), 0.0]
         running = float(dt[regime != 0].sum())
-        ref = reference_features(t, v, f, mass_effective(roles))
+        ref = reference_features(t, v, f, mass_effective(run))
         vc = float(sig[roles["cruise_target"]][0])
         return {
             **{f"r{i}": float(r_true[i]) for i in range(3)},
+            "mass_kg": float(np.asarray(sig[roles["mass"]])[0]),  # the run's load (a variant may draw it)
             "run_time_s": float(t[-1] - t[0]), "running_time_s": running, "max_power_w": float(roles["max_power"]),
             "top_speed_kmh": float(np.max(v) / KMH),
             "cruise_target_kmh": vc / KMH, "cruise_above_140": float(vc / KMH > 140.0),
@@ -153,7 +154,7 @@ class TrainResistance(Study):
         n = len(est["time"])
         fixes = np.flatnonzero(np.asarray(sig[roles["fix"]])[:n] != 0)
         out = {"position": sig[roles["gnss_position"]][fixes], "speed_kmh": sig[roles["gnss_speed"]][fixes] / KMH}
-        m_eff = mass_effective(roles)
+        m_eff = mass_effective(run)
         for name in estimators_of(est):
             if f"{name}.acceleration" not in est or len(fixes) < 2:
                 continue

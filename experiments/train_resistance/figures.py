@@ -14,7 +14,7 @@ import numpy as np
 from railfmu.experiments.engine.plots import _pyplot
 from railfmu.models.train.longitudinal import R0, R1, R2
 
-from railfmu.experiments.train_resistance.scores import ATB_EG, KMH, REGIME_COLOURS, REGIMES, estimators_of
+from railfmu.experiments.train_resistance.scores import ATB_EG, KMH, REGIME_COLOURS, REGIMES, estimators_of, mass_effective
 
 COLOURS = ("C3", "C2", "C1", "C5")  # per estimator, in SSD order
 PUBLISHED = (R0, R1, R2)  # the estimators' default start: the 35 %-load mass-specific KISS values
@@ -40,7 +40,7 @@ def run_figures(run, out: Path) -> list[str]:
     files = []
 
     # Fig. 3: speed, acceleration, effort, r0-r2 with the truth
-    m_eff = float(roles["gamma"]) * (float(roles["tare_mass"]) + float(roles["load_mass"]))
+    m_eff = mass_effective(run)
     v_env = np.linspace(0.1, max(np.max(sig[roles["v"]]), 1.0), 200)
     f_max = np.minimum(float(roles["max_traction_force"]), float(roles["max_power"]) / v_env) / m_eff
     fig, ax = plt.subplots(6, 1, figsize=(9, 14), sharex=True)

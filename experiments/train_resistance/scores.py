@@ -30,7 +30,7 @@ ROLES = {
     **{f"brake_rate_{k}": output("driver", f"brake_rate_{k}") for k in range(1, 6)},
     "acceleration": output("train", "acceleration"), "effort": output("train", "effort_specific"),
     "power": output("train", "power"), "line_term": output("train", "gradient_specific"),
-    "tare_mass": parameter("train", "tare_mass"), "load_mass": parameter("train", "load_mass"),
+    "tare_mass": parameter("train", "tare_mass"), "mass": output("train", "mass"),
     "gamma": parameter("train", "rotating_mass_factor"), "max_power": parameter("train", "max_power"),
     "max_traction_force": parameter("train", "max_traction_force"),
     "max_deceleration": parameter("train", "max_deceleration"),
@@ -86,9 +86,10 @@ def resistance_rel_error(r_hat: np.ndarray, r_true: np.ndarray, grid: np.ndarray
     return float(np.sqrt(np.mean(e * e)))
 
 
-def mass_effective(roles: dict) -> float:
-    """gamma (m_tare + m_load), kg: the train's parameters as the run has them."""
-    return float(roles["gamma"]) * (float(roles["tare_mass"]) + float(roles["load_mass"]))
+def mass_effective(run: RunData) -> float:
+    """gamma m, kg: the train's mass as the run has it (its ``mass`` output: tare plus the
+    run's load, which a variant may draw per run). Scoring only: no observer is told it."""
+    return float(run.roles["gamma"]) * float(np.asarray(run.signals[run.roles["mass"]])[0])
 
 
 def regime_recognisers(system) -> dict[str, str]:
@@ -130,7 +131,8 @@ def regime_scores(run: RunData, name: str, fixes: np.ndarray) -> tuple[dict, dic
     t = np.asarray(est["time"])[fixes]
     style = {k: float(sig[roles[k]][0]) for k in ("cruise_target", "traction_fraction",
                                                   *(f"brake_rate_{j}" for j in range(1, 6)))}
-    train = {k: float(roles[k]) for k in ("max_power", "max_traction_force", "tare_mass", "load_mass")}
+    train = {k: float(roles[k]) for k in ("max_power", "max_traction_force", "tare_mass")}
+    train["load_mass"] = float(np.asarray(sig[roles["mass"]])[0]) - train["tare_mass"]  # the run's load
     train["rotating_mass_factor"] = float(roles["gamma"])
     recogniser = roles.get("regime_recognisers", {}).get(name, "paper")
     m, feats = score(t, np.asarray(est[f"{name}.v"])[fixes], np.asarray(est[f"{name}.acceleration"])[fixes],

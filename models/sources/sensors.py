@@ -15,6 +15,7 @@ initialisation mode)::
     k     = floor((t - t0) / T + eps min(h / T, 1))         sample index (k >= 0)
     y_i   = gain_i u_i + bias_i + sigma_i w_i(k)            enabled = true, distribution_i = 0
     y_i   = gain_i u_i + bias_i exp(sigma_i (2 u2_i(k) - 1))  enabled = true, distribution_i = 1
+    y_i   = gain_i u_i + bias_i + sigma_i (2 u2_i(k) - 1)     enabled = true, distribution_i = 2
     y_i   = u_i                                             enabled = false (exactly)
     eps   = STEP_TOLERANCE = 0.01
 
@@ -29,6 +30,8 @@ uniform interval of ``ln(y_i / bias_i)`` (at ``u_i = 0``), ``u2_i(k)`` the unifo
 channel i's stream at sample k below (the one Box-Muller's cosine reads): ``sigma_i = ln 2``
 draws ``y_i`` between ``bias_i / 2`` and ``2 bias_i``, every ratio scale equally likely (an
 unknown vehicle's Davis coefficient; held over a run by a long ``sample_period``).
+``distribution_i = 2`` draws uniformly between ``bias_i - sigma_i`` and ``bias_i + sigma_i``
+from the same ``u2_i(k)`` (a train's load between empty and full).
 
 Sample instants and the master's clock: ``k`` counts the sample instants ``t0 + j T`` reached
 at ``t``, and an instant that lies less than ``eps min(h, T)`` after ``t`` counts as reached.
@@ -80,7 +83,7 @@ name           unit   default source
 ============== ====== ======= =========================================================
 sigma_1..8     (u_i)  0       standard deviation of the white noise; presets below
                               (distribution_i = 1: half-width of ln y_i / bias_i, 1)
-distribution_1..8 --  0       0 Gaussian white noise, 1 log-uniform scatter of bias_i (Integer)
+distribution_1..8 --  0       0 Gaussian white noise, 1 log-uniform scatter of bias_i, 2 uniform (Integer)
 gain_1..8      1      1       scale factor of the sensor (calibration error)
 bias_1..8      (u_i)  0       offset of the sensor
 seed           1      1       seed of the noise (Integer)
@@ -206,6 +209,10 @@ class SensorNoise:
                 f = log_uniform_factor(p["seed"], i, k, sigma) if sigma != 0 else np.ones(t.shape)
                 out[f"y_{i}"] = p[f"gain_{i}"] * ui + p[f"bias_{i}"] * f
                 continue
+            if p[f"distribution_{i}"] == 2:
+                d = sigma * (2.0 * uniforms(p["seed"], i, k)[1] - 1.0) if sigma != 0 else np.zeros(t.shape)
+                out[f"y_{i}"] = p[f"gain_{i}"] * ui + p[f"bias_{i}"] + d
+                continue
             w = noise(p["seed"], i, k, exact) if sigma != 0 else np.zeros(t.shape)
             out[f"y_{i}"] = p[f"gain_{i}"] * ui + p[f"bias_{i}"] + sigma * w
         return out
@@ -227,8 +234,9 @@ def _parameters() -> list[Parameter]:
         *[Parameter(f"bias_{i}", f"offset of channel {i}, in the unit of u_{i}", "", 0.0,
                     source="choice: ideal sensor") for i in ch],
         *[Parameter(f"distribution_{i}", f"channel {i}: 0 Gaussian white noise sigma_{i} w, 1 log-uniform "
-                    f"scatter bias_{i} exp(sigma_{i} (2 u - 1))", "", 0, type="Integer", min=0, max=1,
-                    source="choice: 0 a sensor; 1 an unknown parameter drawn per run") for i in ch],
+                    f"scatter bias_{i} exp(sigma_{i} (2 u - 1)), 2 uniform bias_{i} + sigma_{i} (2 u - 1)",
+                    "", 0, type="Integer", min=0, max=2,
+                    source="choice: 0 a sensor; 1, 2 an unknown parameter drawn per run") for i in ch],
         Parameter("seed", "seed of the counter-based noise (same seed, same noise in any importer)",
                   "", 1, type="Integer", source="choice"),
         Parameter("sample_period", "sensor sample period: the noise is held for this long (> 0)", "s",

@@ -7,7 +7,7 @@ Equations (SI; ``u`` the command input clipped to [-1, 1], ``v+ = max(v, 0)``)::
     dv/dt = max(f_t - f_b - r0 - g(s), 0)                 v <= 0 (at rest: brakes and r0 hold it)
     r(v)  = r0 + r1 v + r2 v^2                            (eq. 2, Davis; mass-specific, N/kg)
     F_t   = max(u, 0) min(F_max, P_max / v+)              traction envelope (N)
-    f_t   = F_t / (gamma m),  m = m_tare + m_load          mass-specific tractive effort (N/kg)
+    f_t   = F_t / (gamma m),  m = m_tare + l m_load        mass-specific tractive effort (N/kg)
     f_b   = max(-u, 0) b_max                              mass-specific brake effort (N/kg)
     g(s)  = g0 (i(s) / 1000 + w_c(s)) / gamma             line term (N/kg): gradient i in per
                                                           mille, curve w_c (Röckl, optional)
@@ -16,7 +16,10 @@ The command is a signed fraction of the available effort: ``u = 1`` full tractio
 the maximum deceleration ``b_max``, 0 coasting. ``r0, r1, r2`` are inputs, so another
 component (a StepSource, a SignalTable) can make them drift or step during a run; their
 start values are the vehicle's Davis coefficients below divided by ``gamma m`` (the paper's
-mass-specific form, f = F / (gamma m)). ``i(s)`` and the speed limit come from the line
+mass-specific form, f = F / (gamma m)). The load factor ``l`` is an input too (start 1:
+``m_load`` as the parameter says), held over a run, so that a component (a SensorNoise channel
+drawing it uniformly per run) can give each run its own load; the train does not read it during
+a step other than through ``m``. ``i(s)`` and the speed limit come from the line
 profile (``models/track/line_profile.py``: the CSV and its look-up). An RK4 step that brakes
 through ``v = 0`` ends slightly below it; the FMU then sets ``v = 0`` at the communication
 point (the train does not roll back on its brakes).
@@ -108,6 +111,8 @@ def build() -> Model:
     inputs = [
         Input("command", "Traction/brake command: +1 full traction, 0 coast, -1 maximum brake",
               "", 0.0, min=-1.0, max=1.0),
+        Input("load_factor", "Load carried as a fraction of load_mass (1: load_mass; held over a run)",
+              "", 1.0, min=0.0, source="choice: 1 keeps the parameter's load"),
         Input("r0", "Davis constant term (mass-specific)", "N/kg", R0, source=TTOBENCH),
         Input("r1", "Davis linear term (mass-specific)", "N.s/(m.kg)", R1, source=TTOBENCH),
         Input("r2", "Davis quadratic term (mass-specific)", "N.s2/(m2.kg)", R2, source=TTOBENCH),
@@ -122,9 +127,10 @@ def build() -> Model:
     ]
     states = [State("s", "Position along the line", "m", 0.0),
               State("v", "Speed", "m/s", 0.0)]
-    # feedthrough: the effort reads the command, or effort_set where use_effort_set; the line
+    # feedthrough: the effort reads the command, or effort_set where use_effort_set, and the
+    # traction's share of it the mass (load_factor); the line
     # outputs read the position (a state) only; s_set, v_set, set_state act in fmi2DoStep
-    effort = ("command", "effort_set", "use_effort_set")
+    effort = ("command", "effort_set", "use_effort_set", "load_factor")
     davis = ("r0", "r1", "r2")
     outputs = [
         Output("acceleration", "dv/dt at the communication point (eq. 1)", "m/s2", depends_on=effort + davis),
@@ -135,6 +141,8 @@ def build() -> Model:
         Output("gradient", "Line gradient at s (positive uphill)", "", depends_on=()),
         Output("gradient_specific", "Line term g(s) = g0 (i / 1000 + w_c) / gamma: gradient and curve", "N/kg", depends_on=()),
         Output("speed_limit", "Line speed limit at s", "m/s", depends_on=()),
+        Output("mass", "Train mass m = m_tare + load_factor m_load (the run's load)", "kg",
+               depends_on=("load_factor",)),
     ]
     return Model(
         identifier="TrainLongitudinal",
@@ -162,14 +170,18 @@ class Train:
     def __init__(self, params: Mapping[str, float] | None = None, line: LineProfile | Path | str | None = None):
         self.p = {**TRAIN_LONGITUDINAL.default_parameters(), "integrator_step": 0.05, **(params or {})}
         self.line = line if isinstance(line, LineProfile) else LineProfile.read(line or DEFAULT_LINE)
-        self.u = {"command": 0.0, "r0": R0, "r1": R1, "r2": R2, "s_set": 0.0, "v_set": 0.0,
+        self.u = {"command": 0.0, "load_factor": 1.0, "r0": R0, "r1": R1, "r2": R2, "s_set": 0.0, "v_set": 0.0,
                   "set_state": False, "effort_set": 0.0, "use_effort_set": False}
         self.s, self.v, self.t = 0.0, 0.0, 0.0
 
     @property
     def m_eff(self) -> float:
         p = self.p
-        return p["rotating_mass_factor"] * (p["tare_mass"] + p["load_mass"])
+        return p["rotating_mass_factor"] * self.mass
+
+    @property
+    def mass(self) -> float:
+        return self.p["tare_mass"] + self.u["load_factor"] * self.p["load_mass"]
 
     def efforts(self, v: float) -> tuple[float, float]:
         p = self.p
@@ -205,6 +217,8 @@ class Train:
         q = h / self.p["integrator_step"] - 1e-9
         n = max(int(np.ceil(q)) if q > 0 else 0, 1)
         dt = h / n
+        if not self.u["load_factor"] >= 0:
+            raise ValueError(f"input load_factor = {self.u['load_factor']:g} must be >= 0")
         if self.u["set_state"]:
             self.s, self.v = float(self.u["s_set"]), float(self.u["v_set"])
         x = [self.s, self.v]
@@ -230,4 +244,4 @@ class Train:
                 "effort_specific": specific, "power": effort * v,
                 "resistance_specific": u["r0"] + u["r1"] * v + u["r2"] * v * v,
                 "gradient": self.line.gradient_at(self.s), "gradient_specific": self.grade(self.s),
-                "speed_limit": self.line.limit_at(self.s)}
+                "speed_limit": self.line.limit_at(self.s), "mass": self.mass}

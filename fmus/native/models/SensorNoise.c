@@ -5,6 +5,7 @@
  *   k   = floor((t - t0) / T + STEP_TOLERANCE min(h / T, 1))    T = sample_period
  *   y_i = gain_i u_i + bias_i + sigma_i w_i(k)      (y_i = u_i when enabled is false)
  *   y_i = gain_i u_i + bias_i exp(sigma_i (2 u2_i(k) - 1))   distribution_i = 1 (log-uniform)
+ *   y_i = gain_i u_i + bias_i + sigma_i (2 u2_i(k) - 1)      distribution_i = 2 (uniform)
  *
  * w_i(k) is counter-based Gaussian white noise: a pure function of (seed, i, k) built from
  * the SplitMix64 output function and Box-Muller, so it needs no generator state (FMU state
@@ -103,6 +104,9 @@ int model_outputs(ModelInstance *m) {
             const double f = sigma != 0 ? exp(sigma * (2.0 * rng_uniform2(seed, (uint64_t)(j + 1), k) - 1.0))
                                         : 1.0;
             r[VR_Y[j]] = r[VR_GAIN[j]] * r[VR_U[j]] + r[VR_BIAS[j]] * f;
+        } else if (m->i[VRI_DIST[j]] == 2) { /* uniform about the bias: the same u2 */
+            const double d = sigma != 0 ? sigma * (2.0 * rng_uniform2(seed, (uint64_t)(j + 1), k) - 1.0) : 0.0;
+            r[VR_Y[j]] = r[VR_GAIN[j]] * r[VR_U[j]] + r[VR_BIAS[j]] + d;
         } else {
             const double w = sigma != 0 ? rng_normal(seed, (uint64_t)(j + 1), k) : 0.0;
             r[VR_Y[j]] = r[VR_GAIN[j]] * r[VR_U[j]] + r[VR_BIAS[j]] + sigma * w;

@@ -11,8 +11,12 @@
 
 static double clip(double x, double lo, double hi) { return x < lo ? lo : (x > hi ? hi : x); }
 
+static double mass(const ModelInstance *m) { /* m_tare + load_factor m_load (kg) */
+    return m->r[VR_tare_mass] + m->r[VR_load_factor] * m->r[VR_load_mass];
+}
+
 static double effective_mass(const ModelInstance *m) { /* gamma m (kg) */
-    return m->r[VR_rotating_mass_factor] * (m->r[VR_tare_mass] + m->r[VR_load_mass]);
+    return m->r[VR_rotating_mass_factor] * mass(m);
 }
 
 /* The efforts at speed v (m/s) for the command held over the step: traction force (N) and
@@ -54,6 +58,15 @@ static double accel(ModelInstance *m, double s, double v) {
     return r > 0 ? r : 0.0;
 }
 
+/* the load factor is an input (no parameter check at a set): a step refuses a negative one */
+static int check_load_factor(ModelInstance *m) {
+    if (!(m->r[VR_load_factor] >= 0)) {
+        model_error(m, "input load_factor = %g must be >= 0", m->r[VR_load_factor]);
+        return 1;
+    }
+    return 0;
+}
+
 int model_check_parameters(ModelInstance *m) {
     static const fmi2ValueReference pos[] = {VR_tare_mass, VR_rotating_mass_factor,
                                              VR_max_traction_force, VR_max_power,
@@ -83,6 +96,7 @@ int model_initialize(ModelInstance *m) { return load(m); }
 /* set_state: the step starts from (s_set, v_set), a process model's sigma point (the runtime
    refuses non-finite inputs when they are set) */
 int model_step_begin(ModelInstance *m) {
+    if (check_load_factor(m) != 0) return 1;
     if (m->b[VRB_set_state]) {
         m->r[VR_s] = m->r[VR_s_set];
         m->r[VR_v] = m->r[VR_v_set];
@@ -117,6 +131,7 @@ int model_outputs(ModelInstance *m) {
     m->r[VR_gradient] = p->gradient[k];
     m->r[VR_gradient_specific] = gradient_term(m, m->r[VR_s]);
     m->r[VR_speed_limit] = p->limit[k];
+    m->r[VR_mass] = mass(m);
     return 0;
 }
 
