@@ -308,7 +308,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.command == "build" and args.out is None:
         from railfmu.fmus.generate.build import default_out
 
-        args.out = default_out(args.fmi, args.platform)
+        args.out = default_out(args.fmi)
     try:
         return args.fn(args)
     except UserError as exc:

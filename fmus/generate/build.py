@@ -175,18 +175,18 @@ def _guid_of_fmu(path: Path) -> str | None:
         return None
 
 
-def sources_key(platforms=None) -> str:
+def sources_key() -> str:
     """A hash of the bytes of everything an FMU is generated from: the model definitions
     (models/, with their data and the build list), the generator, the runtime and
-    hand-written C, the FMI headers' fmpy version, the compiler and flags of each platform
-    built. Reading bytes takes milliseconds; deriving the models (sympy) takes seconds, so the
-    up-to-date check never derives (a Monte Carlo member pays it on every run)."""
+    hand-written C, the FMI headers' fmpy version, the native compiler and flags. Reading bytes
+    takes milliseconds; deriving the models (sympy) takes seconds, so the up-to-date check never
+    derives (a Monte Carlo member pays it on every run). The platforms built are not in it (the
+    other platforms' flags are in build.py, which is): whether mingw-w64 is on a process's PATH
+    must not move the FMUs to another folder, so a worker or a process with a bare PATH finds the
+    FMUs built, and :func:`_has_binaries` says whether they carry the binaries asked for."""
     import fmpy
 
-    platforms = _platforms(platforms)
-    # linux64 alone hashes as before win64 existed: a machine without mingw keeps its cache
-    build = [(p, compiler(p), cflags(p)) for p in platforms] if platforms != (PLATFORM,) else [cflags(), compiler()]
-    h = hashlib.sha256(repr((*build, fmpy.__version__)).encode())
+    h = hashlib.sha256(repr((cflags(), compiler(), fmpy.__version__)).encode())
     roots = [FMUS.parent / "models", RUNTIME_DIR, CSRC_DIR, COMMON_DIR]
     files = [f for r in roots for f in sorted(r.rglob("*")) if f.is_file() and "__pycache__" not in f.parts]
     files += [HERE / "codegen.py", HERE / "build.py", FMUS / "units.py"]
@@ -196,46 +196,47 @@ def sources_key(platforms=None) -> str:
     return h.hexdigest()
 
 
-def default_out(fmi_version: int = 2, platforms=None) -> Path:
+def default_out(fmi_version: int = 2) -> Path:
     """Where ``railfmu build`` and every run put the FMUs: one folder of the cache per
     :func:`sources_key`, so two versions of railfmu never overwrite each other's FMUs; the
     FMI 3.0 FMUs (same file names) in a sibling folder ending in ``-fmi3``."""
-    key = sources_key(platforms)[:16]
+    key = sources_key()[:16]
     return cache_root() / "fmus" / (key if _check_version(fmi_version) == 2 else f"{key}-fmi3")
 
 
-def definition_key(model: Model | str, fmi_version: int = 2, platforms=None) -> str:
+def definition_key(model: Model | str, fmi_version: int = 2) -> str:
     """The key of one FMU (a model or its identifier): :func:`sources_key` and its name. Equal
     keys give equal FMUs, so a build can be skipped without running the generator (sympy
     takes ~15 s on the full-vehicle model)."""
     identifier = model if isinstance(model, str) else model.identifier
     version = "" if fmi_version == 2 else f" fmi{fmi_version}"  # FMI 2 keys as before
-    return hashlib.sha256(f"{sources_key(platforms)} {identifier}{version}".encode()).hexdigest()
+    return hashlib.sha256(f"{sources_key()} {identifier}{version}".encode()).hexdigest()
 
 
 def _manifest(out_dir: Path) -> Path:
     return out_dir / ".railfmu-build.key"
 
 
-def _manifest_key(fmi_version: int, platforms=None) -> str:
+def _manifest_key(fmi_version: int) -> str:
     """:func:`sources_key`, and the FMI version unless 2: one folder never passes for the other."""
-    return sources_key(platforms) + ("" if fmi_version == 2 else f" fmi{fmi_version}")
+    return sources_key() + ("" if fmi_version == 2 else f" fmi{fmi_version}")
 
 
-def _current_from_manifest(out_dir: Path, fmi_version: int = 2, platforms=None) -> list[Path] | None:
+def _current_from_manifest(out_dir: Path, fmi_version: int = 2, platforms=(PLATFORM,)) -> list[Path] | None:
     """The FMUs of the last full build when nothing they come from has changed since
-    (:func:`sources_key`) and each is still the one built then (its GUID); else None."""
+    (:func:`sources_key`) and each is still the one built then (its GUID), with the binaries of
+    ``platforms``; else None."""
     manifest = _manifest(out_dir)
     if not manifest.is_file():
         return None
     key, *rows = manifest.read_text().split("\n")
-    if key != _manifest_key(fmi_version, platforms):
+    if key != _manifest_key(fmi_version):
         return None
     paths = []
     for row in filter(None, rows):
         identifier, _, guid = row.partition(" ")
         target = out_dir / f"{identifier}.fmu"
-        if _guid_in_archive(target) != guid:
+        if _guid_in_archive(target) != guid or not _has_binaries(target, platforms, fmi_version):
             return None
         paths.append(target)
     return paths
@@ -302,14 +303,15 @@ def build_fmu(model: Model, out_dir: Path | str | None = None, force: bool = Fal
     already there (unless ``force``). ``platforms``: the binaries it carries (``linux64``,
     ``win64``; default :func:`default_platforms`)."""
     platforms = _platforms(platforms)
-    out_dir = default_out(fmi_version, platforms) if out_dir is None else Path(out_dir)
+    out_dir = default_out(fmi_version) if out_dir is None else Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     target = out_dir / f"{model.identifier}.fmu"
-    key = definition_key(model, fmi_version, platforms)
+    key = definition_key(model, fmi_version)
     key_file = _key_file(target)
     if not force and target.exists() and key_file.is_file():
         recorded_key, _, recorded_guid = key_file.read_text().partition(" ")
-        if recorded_key == key and _guid_of_fmu(target) == recorded_guid.strip():
+        if (recorded_key == key and _guid_of_fmu(target) == recorded_guid.strip()
+                and _has_binaries(target, platforms, fmi_version)):
             return target
     from railfmu.fmus.generate import codegen
 
@@ -368,7 +370,7 @@ def build_all(out_dir: Path | str | None = None, models: list[Model] | None = No
     without deriving any model. ``progress`` prints a line per FMU to stderr when anything is
     built. ``platforms``: as for :func:`build_fmu`."""
     platforms = _platforms(platforms)
-    out_dir = default_out(fmi_version, platforms) if out_dir is None else Path(out_dir)
+    out_dir = default_out(fmi_version) if out_dir is None else Path(out_dir)
     if models is None and not force:
         current = _current_from_manifest(out_dir, fmi_version, platforms)
         if current is not None:
@@ -380,7 +382,7 @@ def build_all(out_dir: Path | str | None = None, models: list[Model] | None = No
             raise BuildError(_no_compiler(platform))
     everything = models is None
     models = all_models() if models is None else models
-    key = _manifest_key(fmi_version, platforms)  # before building: an edit during the build must not be recorded as built
+    key = _manifest_key(fmi_version)  # before building: an edit during the build must not be recorded as built
     done = [0]
     if progress:
         print(f"railfmu: building {len(models)} FMI {fmi_version}.0 FMUs for {', '.join(platforms)} into "
