@@ -62,10 +62,6 @@ def _variants(first_only: bool) -> list[tuple[str, str]]:
 @pytest.mark.parametrize("fmi,experiment,variant", [(2, e, v) for e, v in _variants(False)]
                          + [(3, e, v) for e, v in _variants(True)])
 def test_every_exported_variant_validates_against_the_ssp2_schemas(fmu_dir, tmp_path, fmi, experiment, variant):
-    if fmi == 3:
-        from railfmu.fmus.generate.build import build_all, default_out
-
-        build_all(default_out(3))
     system = read_ssp(experiment, variant, fmi_version=fmi)
     doc = _ssd(write_ssp(system, tmp_path / "x.ssp", "2.0"))
     assert _schema_errors(doc) == []
@@ -104,8 +100,8 @@ def test_an_unknown_ssp_version_is_one_line(tmp_path, capsys):
 
 # short runs: the observers, a replay's tables (String values in the FMU copies and in our
 # annotation), the FMI 3 builds' sized types read back
-ROUND_TRIP = [("lateral_alignment", "standard", 2, 0.5), ("trolley_imu_replay", "recorded", 2, 2.0),
-              ("suspension_fault", "step_fault", 3, 0.5)]
+ROUND_TRIP = [("lateral_alignment", "standard", 2, 2.0), ("trolley_imu_replay", "recorded", 2, 2.0),
+              ("suspension_fault", "step_fault", 3, 2.0)]
 
 
 @pytest.mark.parametrize("experiment,variant,fmi,stop", ROUND_TRIP)
@@ -117,7 +113,8 @@ def test_the_2_0_export_runs_as_the_1_0_export(fmu_dir, tmp_path, experiment, va
         assert _ssd(ssp).get("version") == version
         runs[version] = railfmu.run(ssp)
     one, two = runs["1.0"], runs["2.0"]
-    assert two.system.stop_time == stop and len(two.signals["time"]) > 10
+    # a replay runs to its table's end, whatever the archive says
+    assert two.system.stop_time == one.system.stop_time and len(two.signals["time"]) > 10
     # the same System, so the same numbers: equal, not close
     assert one.signals.keys() == two.signals.keys()
     for name, x in one.signals.items():
