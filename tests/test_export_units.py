@@ -74,31 +74,41 @@ def _copy(ssp, component: str, out):
 
 
 def _first_outputs(fmu, guid: str | None = None) -> dict[str, float]:
-    """The Real outputs at t = 0 of ``fmu`` run in FMPy with no parameter set (its start values)."""
+    """The Real outputs at t = 0 of ``fmu`` (FMI 2 or 3) run in FMPy with no parameter set (its
+    start values)."""
     from fmpy import extract
     from fmpy.fmi2 import FMU2Slave
+    from fmpy.fmi3 import FMU3Slave
 
     md = read_model_description(str(fmu))
     unzipped = extract(str(fmu))
-    s = FMU2Slave(guid=guid or md.guid, unzipDirectory=unzipped, modelIdentifier=md.coSimulation.modelIdentifier,
-                  instanceName="copy")
+    three = md.fmiVersion.startswith("3")
+    s = (FMU3Slave if three else FMU2Slave)(guid=guid or md.guid, unzipDirectory=unzipped,
+                                            modelIdentifier=md.coSimulation.modelIdentifier, instanceName="copy")
     s.instantiate()
     try:
-        s.setupExperiment(startTime=0.0)
-        s.enterInitializationMode()
+        if three:
+            s.enterInitializationMode(startTime=0.0)
+        else:
+            s.setupExperiment(startTime=0.0)
+            s.enterInitializationMode()
         s.exitInitializationMode()
-        outs = [v for v in md.modelVariables if v.causality == "output" and v.type == "Real"]
-        return dict(zip((v.name for v in outs), s.getReal([v.valueReference for v in outs])))
+        outs = [v for v in md.modelVariables if v.causality == "output" and v.type in ("Real", "Float64")]
+        values = (s.getFloat64 if three else s.getReal)([v.valueReference for v in outs])
+        return dict(zip((v.name for v in outs), values))
     finally:
         s.terminate()
         s.freeInstance()
 
 
-def test_string_parameters_are_the_copy_s_own_start_values(tmp_path):
+@pytest.mark.parametrize("fmi", [2, 3])
+def test_string_parameters_are_the_copy_s_own_start_values(tmp_path, fmi):
     """OMSimulator 3.0 reads no ssv:String: the SSD has none, and each SignalTable's own FMU copy
-    finds its table and columns with nothing set (the runtime reads the copy's start values),
-    under a GUID of its own that extends the binary's (libcosim unpacks once per GUID)."""
-    ssp, system = export_system("trolley_imu_replay", tmp_path / "x.ssp", "recorded", stop_time=2.0)
+    finds its table and columns with nothing set (the runtime reads the copy's start values:
+    FMI 2's ``start``, FMI 3's ``<Start value=...>``), under a GUID (instantiationToken) of its
+    own that extends the binary's (libcosim unpacks once per GUID)."""
+    ssp, system = export_system("trolley_imu_replay", tmp_path / "x.ssp", "recorded", stop_time=2.0,
+                                fmi_version=fmi)
     guids, seen = {}, []
     for comp in ("imu", "truth"):
         ssd, fmu = _copy(ssp, comp, tmp_path)

@@ -176,7 +176,7 @@ def read_ssp(experiment: ExperimentRef, variant: str | None = None, *, parameter
 
 def export(experiment: ExperimentRef, path: str | os.PathLike, variant: str | None = None, *,
            parameters: Mapping[str, Any] | None = None, seed: int | None = None, stop_time: float | None = None,
-           step_size: float | None = None, fmi_version: int = 2) -> Path:
+           step_size: float | None = None, fmi_version: int = 2, ssp_version: str = "1.0") -> Path:
     """Write one variant as a self-contained ``.ssp`` (SSD, final parameters, FMUs).
 
     The archive names the experiment's study, so ``railfmu.run(path)`` gets its metrics and
@@ -188,6 +188,8 @@ def export(experiment: ExperimentRef, path: str | os.PathLike, variant: str | No
         As for :func:`run`.
     fmi_version : int
         2 (default) or 3: pack the FMI 2.0 or the FMI 3.0 builds of the FMUs.
+    ssp_version : str
+        "1.0" (default) or "2.0" (or 1, 2): write the SSD as SSP 1.0 or SSP 2.0.
     path : str or path-like
         The archive to write; must end in ``.ssp``.
 
@@ -197,21 +199,25 @@ def export(experiment: ExperimentRef, path: str | os.PathLike, variant: str | No
         ``path``.
     """
     return export_system(experiment, path, variant, parameters=parameters, seed=seed, stop_time=stop_time,
-                         step_size=step_size, fmi_version=fmi_version)[0]
+                         step_size=step_size, fmi_version=fmi_version, ssp_version=ssp_version)[0]
 
 
 def export_system(experiment: ExperimentRef, path: str | os.PathLike, variant: str | None = None,
-                  **options) -> tuple[Path, Any]:
+                  ssp_version: str = "1.0", **options) -> tuple[Path, Any]:
     """:func:`export`, returning the archive's path and the system written (for the CLI's line)."""
     from railfmu.fmus.ssp import write_ssp
+    from railfmu.fmus.ssp.writer import SSP_VERSIONS
 
     out = Path(path)
     if out.suffix != ".ssp":
         raise UserError(f"-o {out}: the archive name must end in .ssp")
     if out.is_dir():
         raise UserError(f"-o {out}: a folder of that name exists; give a file name")
+    version = {"1": "1.0", "2": "2.0"}.get(str(ssp_version), str(ssp_version))
+    if version not in SSP_VERSIONS:  # before building and reading anything
+        raise UserError(f"--ssp {ssp_version}: railfmu writes SSP 1.0 and 2.0 (1.0 or 2.0)")
     system = read_ssp(experiment, variant, **options)
-    return write_ssp(system, out), system
+    return write_ssp(system, out, version), system
 
 
 def parameters(experiment: ExperimentRef, variant: str | None = None) -> list[Parameter]:

@@ -156,7 +156,7 @@ def cmd_export(args) -> int:
     exp = find_experiment(args.experiment)
     ensure_folder(Path(args.output).absolute().parent, f"-o {args.output}: its folder")
     out, system = export_system(args.experiment, args.output, args.variant, fmi_version=args.fmi,
-                                **_overrides(args))
+                                ssp_version=args.ssp, **_overrides(args))
     print(f"wrote {out} ({exp.name}/{args.variant or exp.default_variant}, "
           f"{len(system.components)} FMUs inside)")
     return 0
@@ -295,6 +295,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--variant")
     p.add_argument("-o", "--output", required=True, metavar="FILE.ssp")
     _add_fmi(p, "pack the FMI 2.0 (default) or FMI 3.0 builds of the FMUs")
+    p.add_argument("--ssp", choices=("1.0", "2.0"), default="1.0", type=lambda x: {"1": "1.0", "2": "2.0"}.get(x, x),
+                   help="write the SSD as SSP 1.0 (default) or SSP 2.0")
     _add_overrides(p)
     p.set_defaults(fn=cmd_export)
     args = ap.parse_args(argv)

@@ -21,6 +21,13 @@ copies apart. The SSD keeps the String values for railfmu in an ``org.railfmu.st
 annotation (an ``ssv:ParameterSet`` of ``component.parameter`` names), which other tools
 ignore; reading the archive back gives an equal System (apart from paths and file names).
 
+``ssp_version="2.0"`` writes the same archive as SSP 2.0 (same namespaces, ``version="2.0"`` on
+the SSD and on each parameter set); an FMI 3.0 component's connectors and parameters carry
+the sized types of its variables (``ssc:Float64``/``ssv:Float64``, ``Int32``), since SSP 2.0
+wants a connector's type to be its variable's; an FMI 2.0 component keeps ``Real`` and
+``Integer``, which SSP 2.0 keeps as FMI 2.0's types. Each inline parameter set of a 2.0
+archive defines the units its values name (``ssv:Units``: a unit is file-scoped).
+
 A generic FMU (StepSource, SensorNoise, SignalTable) has unit-less channels; the SSD gives
 them a unit on its connectors. Importers that take a connection's units from the FMUs
 (OMSimulator 3.0: "Unit mismatch in connection") would refuse ``fault.y -> coach.k1``, so
@@ -50,14 +57,20 @@ from railfmu.fmus.ssp.xmltools import (
     SSV_NS,
     schema_problems,
 )
+from railfmu.fmus.cosim.slave import FMI3_NAME, fmi_version
 from railfmu.fmus.cosim.system import System, check_system
+from railfmu.models.errors import UserError
 
 _KINDS = ("input", "output", "parameter", "calculatedParameter")  # causalities a connector can show
+SSP_VERSIONS = ("1.0", "2.0")
 
 
-def write_ssp(system: System, out: Path) -> Path:
-    """Write ``system`` to the zip archive ``out`` (replaced atomically) and return its path."""
+def write_ssp(system: System, out: Path, ssp_version: str = "1.0") -> Path:
+    """Write ``system`` to the zip archive ``out`` (replaced atomically) as SSP ``ssp_version``
+    ("1.0" or "2.0") and return its path."""
     out = Path(out)
+    if ssp_version not in SSP_VERSIONS:
+        raise UserError(f"--ssp {ssp_version}: railfmu writes SSP 1.0 and 2.0 (1.0 or 2.0)")
     check_system(system)
     mds = {c.name: c.md for c in system.components}
     files = {c.name: _parameter_files(c) for c in system.components}
@@ -66,7 +79,7 @@ def write_ssp(system: System, out: Path) -> Path:
     generic = _generic_units(system)
     own = {c.name for c in system.components if generic.get(c.name) or baked[c.name] or files[c.name]}
     resources = _resource_names(system, own)
-    doc = _document(system, mds, resources, strings, generic)
+    doc = _document(system, mds, resources, strings, generic, ssp_version)
     problems = schema_problems(doc, "ssd", "SystemStructure.ssd")
     if problems:  # our own output: a bug, not a user error
         raise RuntimeError(f"write_ssp produced an invalid SSD: {problems[0]}")
@@ -241,9 +254,15 @@ def _num(x: float) -> str:
     return repr(float(x))  # shortest text that reads back to the same double
 
 
-def _document(system: System, mds: dict, resources: dict[str, str], strings: dict, generic: dict):
+def _type(v, md, version: str) -> str:
+    """The SSP type of a variable: SSP 2.0 names an FMI 3.0 variable's sized type."""
+    return FMI3_NAME.get(v.type, v.type) if version == "2.0" and fmi_version(md) == 3 else v.type
+
+
+def _document(system: System, mds: dict, resources: dict[str, str], strings: dict, generic: dict,
+              version: str = "1.0"):
     nsmap = {"ssd": SSD_NS, "ssc": SSC_NS, "ssv": SSV_NS, "rf": RF_NS, "osp": OSP_NS, "oms": OMS_NS}
-    doc = etree.Element(f"{{{SSD_NS}}}SystemStructureDescription", nsmap=nsmap, version="1.0",
+    doc = etree.Element(f"{{{SSD_NS}}}SystemStructureDescription", nsmap=nsmap, version=version,
                         name=system.name)
     if system.description:
         doc.set("description", system.description)
@@ -265,11 +284,12 @@ def _document(system: System, mds: dict, resources: dict[str, str], strings: dic
                 given = generic.get(c.name, {}).get(v.name)
                 if not unit and given is not None:  # now declared by this component's FMU copy
                     unit, where = given.name, Units({given.name: given}).then(OURS)
-                _sub(conn, f"ssc:{v.type}", unit=unit if v.type == "Real" and unit else None)
+                _sub(conn, f"ssc:{_type(v, md, version)}", unit=unit if v.type == "Real" and unit else None)
                 if v.type == "Real" and unit:
                     used_units[unit] = where
         if set(c.parameters) - set(strings[c.name]):
-            _parameters(comp, c, {v.name: v for v in md.modelVariables}, strings[c.name])
+            _parameters(comp, c, {v.name: v for v in md.modelVariables}, strings[c.name], version,
+                        units if version == "2.0" else None)
     if system.connections:
         conns = _sub(sys_el, "ssd:Connections")
         variables = {c.name: {v.name: v for v in mds[c.name].modelVariables} for c in system.components}
@@ -282,7 +302,7 @@ def _document(system: System, mds: dict, resources: dict[str, str], strings: dic
                       endElement=k.dst, endConnector=k.dst_var, suppressUnitConversion=suppress)
             if not k.identity:
                 _sub(el, "ssc:LinearTransformation", factor=_num(k.factor), offset=_num(k.offset))
-    _system_annotations(sys_el, system, strings)
+    _system_annotations(sys_el, system, strings, version)
     _units(doc, used_units)
     _experiment(doc, system)
     return doc
@@ -308,13 +328,16 @@ def _shown_variables(system: System) -> dict[str, set[str]]:
     return out
 
 
-def _parameters(comp_el, c, variables: dict, strings: dict[str, str]) -> None:
+def _parameters(comp_el, c, variables: dict, strings: dict[str, str], version: str = "1.0",
+                units: Units | None = None) -> None:
     """One inline parameter set with the component's final values (what libcosim reads),
     except its String values (``strings``: the FMU copy's start values, see the module
-    docstring)."""
+    docstring); with ``units`` (SSP 2.0), an ``ssv:Units`` defining the units its values name."""
+    sized = version == "2.0" and fmi_version(c.md) == 3
     binding = _sub(_sub(comp_el, "ssd:ParameterBindings"), "ssd:ParameterBinding")
-    pset = _sub(_sub(binding, "ssd:ParameterValues"), "ssv:ParameterSet", version="1.0", name=c.name)
+    pset = _sub(_sub(binding, "ssd:ParameterValues"), "ssv:ParameterSet", version=version, name=c.name)
     params = _sub(pset, "ssv:Parameters")
+    named: dict[str, Units] = {}
     for name, value in c.parameters.items():
         if name in strings:
             continue
@@ -324,21 +347,29 @@ def _parameters(comp_el, c, variables: dict, strings: dict[str, str]) -> None:
         if t == "Boolean":
             _sub(p, "ssv:Boolean", value="true" if value else "false")
         elif t in ("Integer", "Enumeration"):
-            _sub(p, "ssv:Integer", value=str(int(value)))
+            _sub(p, "ssv:Int32" if sized else "ssv:Integer", value=str(int(value)))
         elif t == "String":
             _sub(p, "ssv:String", value=str(value))
         else:
-            _sub(p, "ssv:Real", value=_num(value), unit=var.unit if var is not None and var.unit else None)
+            unit = var.unit if var is not None and var.unit else None
+            _sub(p, "ssv:Float64" if sized else "ssv:Real", value=_num(value), unit=unit)
+            if unit and units is not None:
+                named[unit] = units
+    if named:
+        _units(pset, named, "ssv:Units")
 
 
-def _units(doc, used: dict[str, Units]) -> None:
-    """ssd:Units for every unit a connector names (the schema wants them defined in the file)."""
+def _units(doc, used: dict[str, Units], tag: str = "ssd:Units") -> None:
+    """ssd:Units for every unit a connector names (the schema wants them defined in the file),
+    or a parameter set's ssv:Units after its ssv:Parameters."""
     defined = [(name, units.get(name)) for name, units in sorted(used.items())]
     defined = [(n, u) for n, u in defined if u is not None]
     if not defined:
         return
-    units_el = etree.Element(f"{{{SSD_NS}}}Units")
-    doc.find("ssd:System", NS).addnext(units_el)  # order: System, Enumerations, Units, DefaultExperiment
+    prefix, _, name = tag.partition(":")
+    units_el = etree.Element(f"{{{NS[prefix]}}}{name}")
+    # order: System, Enumerations, Units, DefaultExperiment; Parameters, Enumerations, Units
+    doc.find("ssd:System" if prefix == "ssd" else "ssv:Parameters", NS).addnext(units_el)
     for name, u in defined:
         base = {b: str(e) for b, e in zip(BASE, u.exponents) if e}
         if u.factor != 1.0:
@@ -357,7 +388,7 @@ def _experiment(doc, system: System) -> None:
     _sub(_sub(a, "osp:Algorithm"), "osp:FixedStepAlgorithm", baseStepSize=_num(system.step_size))
 
 
-def _system_annotations(sys_el, system: System, strings: dict[str, dict[str, str]]) -> None:
+def _system_annotations(sys_el, system: System, strings: dict[str, dict[str, str]], version: str = "1.0") -> None:
     annotations = _sub(sys_el, "ssd:Annotations")
     # OMSimulator 3.0 (SystemWC) reads only the first annotation of a system, and without its
     # own it has no step size: its fixed-step master comes first, ours are ignorable after it
@@ -366,7 +397,7 @@ def _system_annotations(sys_el, system: System, strings: dict[str, dict[str, str
     _sub(oms, "oms:FixedStepMaster", description="oms-ma", stepSize=_num(system.step_size))
     if any(strings.values()):  # String values for railfmu's reader (the FMU copies carry them for the rest)
         pset = _sub(_sub(annotations, "ssc:Annotation", type="org.railfmu.strings"), "ssv:ParameterSet",
-                    version="1.0", name="strings")
+                    version=version, name="strings")
         params = _sub(pset, "ssv:Parameters")
         for comp, values in strings.items():
             for name, value in values.items():

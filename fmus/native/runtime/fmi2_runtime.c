@@ -387,7 +387,8 @@ char *model_resolve_path(ModelInstance *m, const char *path) {
    modelDescription.xml has them as start values, for importers that set no String
    parameter (OMSimulator 3.0 reads no ssv:String). The binary is the same, so it takes
    its String start values from the modelDescription.xml of the unpacked FMU, beside
-   resources/ (what the compiled defaults are when nothing is found). Such a copy's GUID is
+   resources/ (what the compiled defaults are when nothing is found): FMI 2.0's
+   <String start=...> and FMI 3.0's <Start value=...> child. Such a copy's GUID is
    this binary's followed by "-" and a suffix: importers that unpack an FMU once per GUID
    (libcosim) keep the copies apart. */
 
@@ -537,6 +538,29 @@ static void md_string_starts(Instance *inst) {
         }
         free(name);
         p = body;
+    }
+    /* FMI 3.0: <String name="..." ...><Start value="..."/></String> (a scalar: its first Start) */
+    for (p = strstr(text, "<ScalarVariable") ? NULL : strstr(text, "<String"); p; p = strstr(p, "<String")) {
+        const char *end = tag_end(p), *body, *s;
+        char *name;
+        size_t k;
+        if (!end) break;
+        if (p[7] != ' ' && p[7] != '\t' && p[7] != '\r' && p[7] != '\n') { /* <StringType ...> */
+            p = end;
+            continue;
+        }
+        body = end[-1] == '/' ? NULL : strstr(end, "</String");
+        s = body ? strstr(end, "<Start") : NULL;
+        name = s && s < body ? xml_attribute(p, end, "name") : NULL;
+        if (name) {
+            const char *s_end = tag_end(s);
+            for (k = 0; k < N_STRING && s_end; k++) {
+                if (strcmp(model_string_info[k].name, name) == 0 && !inst->stringStart[k])
+                    inst->stringStart[k] = xml_attribute(s, s_end, "value");
+            }
+        }
+        free(name);
+        p = body ? body + 1 : end;
     }
     free(text);
 }
