@@ -66,7 +66,8 @@ def test_roles_are_bound_from_the_ssd(fmu_dir):
 
     system = read_system(EXPERIMENTS / "suspension_fault", variant="step_fault", fmu_dirs=[fmu_dir])
     roles = suspension_fault.STUDY.bind(system)
-    assert roles == {"k1": "fault.y", "k1_before": 430e3, "k1_after": 215e3, "fault_time": 20.0}
+    assert roles == {"k1": "fault.y", "k1_before": 430e3, "k1_after": 215e3, "fault_time": 20.0,
+                     "recorded": False, "recording_offset": "recording.offset"}  # step_fault reads the exact track
     system = read_system(EXPERIMENTS / "lateral_alignment", variant="standard", fmu_dirs=[fmu_dir],
                          overrides={"run": {"V": "25"}})
     roles = lateral_alignment.STUDY.bind(system)

@@ -66,6 +66,7 @@ SCENARIOS = {
                       {**{f"z_{s}": _sine(1e-3, 3.0, k) for k, s in enumerate(["l1", "r1", "l2", "r2"])},
                        **{f"dz_{s}": _sine_rate(1e-3, 3.0, k) for k, s in enumerate(["l1", "r1", "l2", "r2"])}}),
     "TrackIrregularity": (1e-3, 1000, {"V": 30.0, "seed": 7}, {}),
+    "TrackRecording": (1e-3, 1000, {"V": 30.0, "seed": 7}, {}),  # the recording, with its drawn offset and error
     "StepSource": (1e-2, 100, {"step_time": 0.5, "final_value": 2.0}, {}),
     "SensorNoise": (1e-3, 1000, {"sigma_1": 0.1, "sigma_2": 0.5, "distribution_2": 1, "bias_2": 2.0, "seed": 11},
                     {"u_1": _sine(1.0, 5.0)}),
