@@ -229,9 +229,15 @@ int model_outputs(ModelInstance *m) {
     }
     for (i = 0; i < N_BOGIES; i++) {
         const double u = (front - r[VR_AXLE[i]]) / delta, jf = floor(u), tau = u - jf;
-        const int64_t j = (int64_t)jf;
+        int64_t j;
         double yl[4], yr[4], zl, zl_d, zr, zr_d;
         int q;
+        if (!(fabs(jf) < 4.0e15)) { /* a sample index must fit an int64 exactly (and not be NaN) */
+            model_error(m, "TrackRecording: position %g m is beyond the recording's %g m samples' range",
+                        front - r[VR_AXLE[i]], delta);
+            return -1;
+        }
+        j = (int64_t)jf;
         for (q = 0; q < 4; q++) sample(m, d, j - 1 + q, &yl[q], &yr[q]);
         hermite(tau, delta, yl[1], (yl[2] - yl[0]) / (2.0 * delta), yl[2], (yl[3] - yl[1]) / (2.0 * delta),
                 &zl, &zl_d);
