@@ -220,14 +220,15 @@ class LateralAlignment(Study):
                           ("RTS smoother", mm * smoothed, "mm", rts),
                           ("wheelset y (CM)", mm * np.asarray(signals[roles["wheelset_y"]]), "mm",
                            {"color": "C2", "lw": 0.7, "alpha": 0.7})]],
-                        width=10, legend_columns=4)]
+                        width=11, quantities=["lateral alignment"])]
         files.append(figure(out, "alignment_bands.png",
                             "Alignment per EN 13848 band: D1 3-25 m, D2 25-70 m, D3 70-200 m (Muñoz et al., Fig. 6)",
                             s, s_label,
                             [[(f"real, {band}", mm * bandpass(truth, V, dt, band), "mm", real),
                               (f"filter, {band}", mm * bandpass(est, V, dt, band), "mm", kf),
                               (f"smoother, {band}", mm * bandpass(smoothed, V, dt, band), "mm", rts)]
-                             for band in ("D1", "D2", "D3")], width=10, legend_columns=3))
+                             for band in ("D1", "D2", "D3")], width=11,
+                            quantities=[f"alignment, {band}" for band in ("D1", "D2", "D3")]))
         return files
 
     def report_md(self, metrics: dict) -> str:
