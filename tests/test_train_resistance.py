@@ -373,3 +373,14 @@ def test_unknown_stock_with_the_load_drawn(tmp_path, fmu_dir):
         assert m["ukf_paper"]["resistance_rel_error"] > 3 * e
     assert max(loads) > 0.8 and min(loads) < 0.1  # both ends of the load range are exercised
     assert np.median(errs) <= 0.03
+
+
+def test_a_run_shorter_than_the_gnss_interval_is_refused_in_one_line(tmp_path):
+    """3 s of a run whose fixes come every 10 s hold only the initial fix: no estimate and no score,
+    so the run is refused before it starts (it ended in a numpy traceback)."""
+    res = railfmu("run", "train_resistance", "--stop-time", "3", "--out", str(tmp_path / "short"))
+    assert res.returncode == 2, res.stderr
+    lines = res.stderr.strip().splitlines()
+    assert len(lines) == 1 and "ends before its first GNSS fix" in lines[0] and "Traceback" not in res.stderr
+    res = railfmu("run", "train_resistance", "--stop-time", "10", "-q", "--out", str(tmp_path / "one_fix"))
+    assert res.returncode == 0, res.stderr  # one fix after the start is enough to score

@@ -77,6 +77,10 @@ class TrainResistance(Study):
         roles = super().bind(system)
         roles["regime_recognisers"] = regime_recognisers(system)
         period = float(roles["gnss_period"])
+        if system.stop_time - system.start_time < period:  # the fix at the start is the initial state
+            raise UserError(f"{system.source or system.name}: the run ({system.stop_time - system.start_time:g} s) "
+                            f"ends before its first GNSS fix after the start (every {period:g} s): nothing to "
+                            f"estimate or score; give a stop time of at least {period:g} s")
         for o in system.observers:
             own = o.period if o.period is not None else system.step_size
             if any(s.startswith("gnss.") for s in o.measurements.values()) and abs(own - period) > 1e-9 * period:
