@@ -220,7 +220,8 @@ def figure(out: Path, fname: str, title: str, x: np.ndarray, x_label: str, axes:
 def plot_signals(spec: dict | None, signals: dict[str, np.ndarray], roles: dict, units: dict[str, str], out: Path,
                  position=None, columns: dict[str, str] | None = None) -> list[str]:
     """The study's signal figures (``{file: (title, [[(signal or role, label), ...] per axis])}``;
-    a label may end in a display unit, ``"measured alignment [mm]"``); without them, every
+    a label may end in a display unit, ``"measured alignment [mm]"``; an axis's list may start
+    with the quantity its y-axis names, ``["vertical displacement", (...), ...]``); without them, every
     recorded signal on its own axis (at most 8). A replayed channel's label names its file
     column."""
     columns = columns or {}
@@ -230,10 +231,11 @@ def plot_signals(spec: dict | None, signals: dict[str, np.ndarray], roles: dict,
     x, x_label = x_axis(signals, position)
     files = []
     for fname, (title, axes) in spec.items():
-        axes_spec = []
+        axes_spec, quantities = [], []
         for curves in axes:
+            quantity = curves[0] if curves and isinstance(curves[0], str) else None
             axis = []
-            for s, label in curves:
+            for s, label in curves[quantity is not None:]:
                 sig = roles.get(s, s)
                 if sig not in signals:
                     continue
@@ -243,8 +245,9 @@ def plot_signals(spec: dict | None, signals: dict[str, np.ndarray], roles: dict,
                 axis.append((f"{name} ({col})" if col and col not in name else name, values, unit))
             if axis:
                 axes_spec.append(axis)
+                quantities.append(quantity)
         if axes_spec:
-            files.append(figure(out, fname, title, x, x_label, axes_spec))
+            files.append(figure(out, fname, title, x, x_label, axes_spec, quantities=quantities))
     return files
 
 

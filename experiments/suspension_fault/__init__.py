@@ -34,7 +34,7 @@ ROLES = {  # where the SSD holds what the study reads
 
 PLOTS = {  # Fig. 2 of Onat et al. (2016) is the step_response variant of this figure
     "coach_response.png": ("Coach and bogie bounce over the rail height under bogie 1 and 2",
-                           [[("track.vertical_left_1", "rail under bogie 1"),
+                           [["vertical displacement", ("track.vertical_left_1", "rail under bogie 1"),
                              ("track.vertical_left_2", "rail under bogie 2"),
                              ("coach.z_c", "coach bounce z_c"), ("coach.z_b1", "bogie 1 bounce"),
                              ("coach.z_b2", "bogie 2 bounce")],
@@ -110,7 +110,8 @@ class SuspensionFault(Study):
         curves += [(f"{name} estimate", np.asarray(estimates[f"{name}.k1"]) / 1e3, "kN/m", {"color": c, "lw": 1})
                    for name, c in zip(ESTIMATORS, ("C1", "C0")) if f"{name}.k1" in estimates]
         files.append(figure(out, "k1_estimates.png", "Secondary vertical stiffness: estimates and truth "
-                            "(Fig. 3 of Onat et al. (2016))", ts, "time [s]", [curves]))
+                            "(Fig. 3 of Onat et al. (2016))", ts, "time [s]", [curves],
+                            quantities=["secondary vertical stiffness k1"]))
         return files
 
     def report_md(self, metrics: dict) -> str:
