@@ -12,6 +12,7 @@ they are installed). ``railfmu run X.fmu`` on the Reference-FMUs equals ``fmpy.s
 
 from __future__ import annotations
 
+import csv
 import subprocess
 import sys
 from pathlib import Path
@@ -411,3 +412,25 @@ def test_an_fmu_fmpy_validation_rejects_is_read_with_one_warning(tmp_path):
     lines = [line for line in res.stderr.splitlines() if "validation" in line]
     assert len(lines) == 1 and "DPController.fmu" in lines[0] and '"iex"' in lines[0] and "not unique" in lines[0], lines
     assert len((tmp_path / "out" / "signals.csv").read_text().splitlines()) == 1 + 6  # 0.2 s at 0.04 s
+
+
+def test_dp_ship_controller_acts_when_sampled_before_the_transfer(tmp_path):
+    """`--sampling before-transfer` reads no output between setting an FMU's inputs and its next
+    doStep: OSP's DP controller (FMI 1.0) then acts from 2 s, as in libcosim (compared row by
+    row in tests/interop); the option is the Jacobi master's, refused in one line elsewhere."""
+    def cli(*args):
+        return subprocess.run([sys.executable, "-m", "railfmu.experiments.engine.cli", "run", "-q",
+                               str(SSPS["vico/dp-ship"]), "--stop-time", "3", *args],
+                              capture_output=True, text=True)
+
+    res = cli("--sampling", "before-transfer", "--out", str(tmp_path / "out"))
+    assert res.returncode == 0 and "Traceback" not in res.stderr, res.stderr
+    with open(tmp_path / "out" / "signals.csv") as f:
+        rows = list(csv.DictReader(f))
+    mz = [float(r["DP Controller.ControlMz"]) for r in rows]
+    assert len(rows) == 76 and mz[:50] == [0.0] * 50 and min(mz) < -100.0  # acts from 2 s (row 50)
+    res = cli("--sampling", "before-transfer", "--master", "container", "--out", str(tmp_path / "c"))
+    assert res.returncode == 2 and "Traceback" not in res.stderr
+    assert res.stderr.strip().splitlines() == [
+        "railfmu: error: --sampling before-transfer: only the Jacobi master reads its rows before the transfer "
+        "(the container master samples after it); use --master jacobi"], res.stderr

@@ -301,3 +301,30 @@ def test_step_size_must_divide(fmu_dir):
 def test_unknown_master(fmu_dir):
     with pytest.raises(UserError, match="unknown master"):
         run(track_wheelset(fmu_dir), "newton")
+
+
+def test_sampling_before_the_transfer(fmu_dir):
+    """``sampling="before-transfer"`` (libcosim's order) reads each row right after the step,
+    before any input is set: the trajectory is the Jacobi master's (the same inputs reach
+    every step), so every output that does not pass an input straight through is equal bit
+    for bit; the wheelset's ddy (direct feedthrough of xi) is read while the FMU still holds
+    the input of the step before, so it differs (by less than its range: the same states)."""
+    system = track_wheelset(fmu_dir, record=["wheelset.y", "wheelset.dy", "wheelset.ddy", "wheelset.xi",
+                                             "track.alignment_1"])
+    default = run(system, "jacobi", progress=False)
+    before = run(system, "jacobi", progress=False, sampling="before-transfer")
+    for name in ("wheelset.y", "wheelset.dy", "track.alignment_1"):
+        np.testing.assert_array_equal(col(before, name), col(default, name), err_msg=name)
+    # the input as the FMU held it during the step that ended at t_k: its source's value at t_k-1
+    np.testing.assert_array_equal(col(before, "wheelset.xi")[1:], col(default, "track.alignment_1")[:-1])
+    assert col(before, "wheelset.xi")[0] == 0.0  # the start value: row 0 is read before the first copy
+    ddy_b, ddy_d = col(before, "wheelset.ddy"), col(default, "wheelset.ddy")
+    assert not np.array_equal(ddy_b, ddy_d) and np.max(np.abs(ddy_b - ddy_d)) < 0.5 * np.ptp(ddy_d)
+
+
+@pytest.mark.parametrize("master", ["gauss-seidel", "container"])
+def test_sampling_before_the_transfer_is_the_jacobi_masters(fmu_dir, master):
+    with pytest.raises(UserError, match="only the Jacobi master"):
+        run(track_wheelset(fmu_dir), master, progress=False, sampling="before-transfer")
+    with pytest.raises(UserError, match="unknown sampling"):
+        run(track_wheelset(fmu_dir), "jacobi", progress=False, sampling="after-step")

@@ -44,7 +44,7 @@ def run(experiment: ExperimentRef, variant: str | None = None, *, parameters: Ma
         seed: int | None = None, master: str | None = None, stop_time: float | None = None,
         step_size: float | None = None, out: str | os.PathLike | None = None, progress: bool = False,
         log: TextIO | None = None, verbose: bool = False, fmi_version: int = 2,
-        record_format: str = "csv") -> Run:
+        record_format: str = "csv", sampling: str = "after-transfer") -> Run:
     """Run one experiment and return its signals, estimates and metrics in memory.
 
     Parameters
@@ -81,6 +81,11 @@ def run(experiment: ExperimentRef, variant: str | None = None, *, parameters: Ma
     record_format : str
         ``"csv"`` (default), ``"parquet"`` or ``"mat"``: the format of the signals and
         estimates written into ``out`` (:func:`read_signals` reads any of them back).
+    sampling : str
+        ``"after-transfer"`` (default): each row is read after every connection is copied;
+        ``"before-transfer"`` (Jacobi master only): right after the step, before any input is
+        set, as libcosim reads; for FMUs that sample their inputs when their outputs are read
+        (a direct-feedthrough output then shows the previous step's inputs).
 
     Returns
     -------
@@ -101,7 +106,7 @@ def run(experiment: ExperimentRef, variant: str | None = None, *, parameters: Ma
     """
     r = execute(experiment, variant, out, master, _sets(parameters), seed, stop_time, step_size,
                 progress=progress, log=log, verbose=verbose, fmi_version=fmi_version,
-                record_format=record_format)
+                record_format=record_format, sampling=sampling)
     if out is not None:
         r.save(out, log=log)
     return r

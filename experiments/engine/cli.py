@@ -122,7 +122,7 @@ def cmd_run(args) -> int:
     log = _log(args)
     run(args.experiment, args.variant, master=args.master, out=out, progress=not args.quiet,
         log=log if log is not None else _Quiet(), verbose=args.verbose, fmi_version=args.fmi,
-        record_format=args.format, **_overrides(args))
+        record_format=args.format, sampling=args.sampling, **_overrides(args))
     return 0
 
 
@@ -267,6 +267,9 @@ def main(argv: list[str] | None = None) -> int:
     _add_fmi(p, "run railfmu's FMUs as their FMI 2.0 (default) or FMI 3.0 builds")
     p.add_argument("--format", default="csv", choices=("csv", "parquet", "mat"),
                    help="signals and estimates as CSV (default), Parquet or MATLAB .mat (compact)")
+    p.add_argument("--sampling", default="after-transfer", choices=("after-transfer", "before-transfer"),
+                   help="read each row after the connections are copied (default), or right after the step, "
+                        "before any input is set (libcosim's order; Jacobi master only)")
     _add_overrides(p)
     p.set_defaults(fn=cmd_run)
     p = sub.add_parser("study", help="variants x seeds of an experiment, in parallel (Dask) -> table")

@@ -111,7 +111,7 @@ def execute(name: str | Path, variant: str | None = None, out: Path | str | None
             stop_time: float | None = None, step_size: float | None = None, progress: bool = True,
             log: TextIO | None = sys.stderr, warn: Callable[[str], None] | None = None,
             series: bool = False, verbose: bool = False, fmi_version: int = 2,
-            record_format: str = "csv") -> Run:
+            record_format: str = "csv", sampling: str = "after-transfer") -> Run:
     """Run one variant in memory and return the :class:`Run`. ``out``: stream signals.csv and
     estimates.csv into that folder as the run goes (an interrupted run keeps its complete
     rows); the other files are :meth:`Run.save`'s. ``log``: the progress lines (None: none);
@@ -120,8 +120,9 @@ def execute(name: str | Path, variant: str | None = None, out: Path | str | None
     ``master`` None: the one the experiment prefers (``<rf:FixedStep master=...>``), else jacobi.
     ``fmi_version``: run railfmu's own FMUs as FMI 2.0 (default) or 3.0 builds; an SSP's
     packed FMUs run as they are. ``record_format``: csv, parquet or mat for the signals and
-    estimates (:mod:`railfmu.experiments.engine.records`)."""
-    from railfmu.fmus.cosim.masters import MASTERS, run
+    estimates (:mod:`railfmu.experiments.engine.records`). ``sampling``: when the rows are
+    read (:func:`railfmu.fmus.cosim.masters.run`)."""
+    from railfmu.fmus.cosim.masters import MASTERS, SAMPLINGS, run
     from railfmu.experiments.engine import records
 
     from railfmu.experiments.engine.observer_bank import ObserverBank
@@ -133,13 +134,19 @@ def execute(name: str | Path, variant: str | None = None, out: Path | str | None
     records.check_format(record_format)
     if master is not None and master not in MASTERS:
         raise UserError(f"--master {master!r}: choose one of {', '.join(MASTERS)}")
+    if sampling not in SAMPLINGS:
+        raise UserError(f"--sampling {sampling!r}: choose one of {', '.join(SAMPLINGS)}")
+    if sampling != "after-transfer" and master not in (None, "jacobi"):
+        raise UserError(f"--sampling {sampling}: only the Jacobi master reads its rows before the transfer "
+                        f"(the {master} master samples after it); use --master jacobi")
     exp = find_experiment(name)
     variant = variant or exp.default_variant
     out = Path(out) if out is not None else None
     if out is not None and out.exists() and not out.is_dir():
         raise UserError(f"--out {out}: a file of that name exists; give a folder")
     system = load_system(exp, variant, sets, seed, stop_time, step_size, fmi_version)
-    master = master or system.master or DEFAULT_MASTER
+    # the rows read before the transfer are the Jacobi master's alone, whatever the SSD prefers
+    master = master or ("jacobi" if sampling != "after-transfer" else system.master) or DEFAULT_MASTER
     roles = exp.study.bind(system)
     if out is not None:
         ensure_folder(out)
@@ -167,7 +174,8 @@ def execute(name: str | Path, variant: str | None = None, out: Path | str | None
                         record_format)
     setup_s = time.perf_counter() - t_setup
     try:
-        result = run(system, master=master, sinks=[s for s in (recorder, bank) if s is not None], progress=progress)
+        result = run(system, master=master, sinks=[s for s in (recorder, bank) if s is not None], progress=progress,
+                     sampling=sampling)
     except UserError as exc:
         if recorder is None or recorder.rows_written == 0:  # nothing (or a bare header) written: cite no file
             raise
@@ -187,6 +195,8 @@ def execute(name: str | Path, variant: str | None = None, out: Path | str | None
     t_est, est = bank.arrays()
     estimates = {"time": t_est, **{c: est[:, j] for j, c in enumerate(bank.columns)}, **bank.offline_estimates()}
     early_end, notes = result.early_end, list(system.notes) + list(result.notes)
+    if sampling != "after-transfer":
+        notes.append(f"sampling {sampling}: each row read right after the step, before the connections are copied")
     ends = [c for c, f in (getattr(system, "replay", None) or {}).get("files", {}).items() if f["ends_run"]]
     if early_end and any(f"({c})" in early_end for c in ends):  # a replay's last row: its normal end
         notes = [n for n in notes if n != early_end] + [f"the run ended at the replay's last row: {early_end}"]

@@ -30,7 +30,8 @@ with its own coupling); then every connection has been copied from the outputs a
 input -> output dependencies, so a chain of direct-feedthrough components is consistent end
 to end); then the signals are read. So an input reads its source's output at t_k, and a
 direct-feedthrough output (the wheelset's ``ddy`` depends on ``xi``) is the one the FMU
-computes from the inputs it holds at that moment. For Gauss-Seidel, this post-sweep copy
+computes from the inputs it holds at that moment. (The Jacobi master can instead read the row
+right after the step, before any input is set: :func:`run`'s ``sampling``.) For Gauss-Seidel, this post-sweep copy
 sets the same values the next sweep would set for every input whose source steps later,
 and is overwritten by the t_k+1 value for the others before their FMU steps; it changes no
 trajectory, only makes the sample consistent. The row at t_0 is taken after the initial
@@ -76,6 +77,9 @@ from railfmu.fmus.cosim.slave import Slave, Status
 from railfmu.fmus.cosim.system import Connection, Sink, System, carried_type, check_system, recorded_signals
 
 MASTERS = ("jacobi", "gauss-seidel", "container")
+#: when the Jacobi master reads a row (:func:`run`'s ``sampling``): after every connection is
+#: copied (the default, every master), or right after the step, before any input is set
+SAMPLINGS = ("after-transfer", "before-transfer")
 BLOCK_ROWS = 1000  # container path: rows per C call / per write_block
 HAND_OVER_ROWS = 500  # Python masters: rows checked (finite) and handed to the sinks at once (observers are passive); 1 if a sink sets every_step
 
@@ -341,9 +345,16 @@ class _Link:
         self.what = f"{kind} of {', '.join(str(c) for c in conns)}"
 
     def transfer(self, t: float) -> None:
+        self.fetch(t)
+        self.put(t)
+
+    def fetch(self, t: float) -> None:
+        """Read the sources' values (:meth:`put` sets them on the destinations)."""
         s = self.get(self.src.c, self.src_vrs, self.n, self.src_buf)
         if s > Status.WARNING:
             raise self.src.fail(f"fmi2Get{self.what} at t = {t:.9g} s", s)
+
+    def put(self, t: float) -> None:
         if self.convert:
             src, dst = self.src_buf, self.dst_buf
             for i in range(self.n):
@@ -441,7 +452,7 @@ def _row_buffer(n: int, columns: list[str]) -> np.ndarray:
 
 
 def _run_python(system: System, master: str, sinks: Sequence[Sink], progress: bool,
-                max_steps: int | None = None) -> RunResult:
+                max_steps: int | None = None, sampling: str = "after-transfer") -> RunResult:
     """``max_steps``: stop after that many steps (the container's replay of a failure)."""
     n = check_system(system)
     if max_steps is not None:
@@ -507,7 +518,17 @@ def _run_python(system: System, master: str, sinks: Sequence[Sink], progress: bo
         try:
             for k in range(n + 1):
                 t = start + k * h
-                if master == "jacobi":
+                if master == "jacobi" and sampling == "before-transfer":
+                    sampler.sample(k, t)  # no output is read once an input is set, until the step
+                    if k == n:
+                        break
+                    for link in links:
+                        link.fetch(t)
+                    for link in links:
+                        link.put(t)
+                    for f in steppers:
+                        f.step(t, h)
+                elif master == "jacobi":
                     for link in links:  # all outputs at t first, then all steps
                         link.transfer(t)
                     sampler.sample(k, t)
@@ -739,8 +760,16 @@ def _ctypes_steps(sig: _Signals, f: _Fmu, t_fmu, h, start, k0, m, data) -> tuple
 
 # -- entry point -----------------------------------------------------------------------------
 
-def run(system: System, master: str = "jacobi", sinks: Sequence[Sink] = (), progress: bool = True) -> RunResult:
+def run(system: System, master: str = "jacobi", sinks: Sequence[Sink] = (), progress: bool = True,
+        sampling: str = "after-transfer") -> RunResult:
     """Run ``system`` with ``master`` (one of :data:`MASTERS`), feeding ``sinks`` as it goes.
+
+    ``sampling`` (:data:`SAMPLINGS`): ``after-transfer``, the row at t_k is read after every
+    connection is copied (every master); ``before-transfer`` (Jacobi only), the row at t_k is
+    read right after the step to t_k, then all connections' sources are read, then all their
+    destinations set, then every FMU steps: no output is read between setting an FMU's inputs
+    and its next doStep (libcosim's order; an FMU may sample its inputs on that read), and a
+    direct-feedthrough output in the row reflects the inputs of t_k-1.
 
     Sinks get ``open(columns)``, then the rows (``write_block``: the Python masters every
     :data:`HAND_OVER_ROWS` steps, or every step when a sink sets ``every_step``; the container
@@ -753,6 +782,13 @@ def run(system: System, master: str = "jacobi", sinks: Sequence[Sink] = (), prog
     """
     if master not in MASTERS:
         raise UserError(f"unknown master {master!r}; choose one of {', '.join(MASTERS)}")
+    if sampling not in SAMPLINGS:
+        raise UserError(f"unknown sampling {sampling!r}; choose one of {', '.join(SAMPLINGS)}")
+    if sampling != "after-transfer":
+        if master != "jacobi":
+            raise UserError(f"sampling {sampling}: only the Jacobi master reads its rows before the transfer "
+                            f"(the {master} master samples after it); use --master jacobi")
+        return _run_python(system, master, sinks, progress, sampling=sampling)
     if master == "container":
         from railfmu.fmus.cosim.trial import container_refusal
 

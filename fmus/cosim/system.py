@@ -300,8 +300,13 @@ def _compiled(fmu: Path, where: str) -> Path:
             with open(work / "build.log", "wb") as log:
                 os.dup2(log.fileno(), 1)
                 build_platform_binary(work / "fmu", build_dir=work / "build")
-                aliases = _unprefixed(work / "fmu")
-                if aliases:  # once more, with the standard names as aliases of the prefixed ones
+                for attempt in range(3):  # checked after every build: a copy without aliases is never cached
+                    aliases = _unprefixed(work / "fmu")
+                    if not aliases:
+                        break
+                    if attempt == 2:
+                        raise RuntimeError("the binary built from them exports only prefixed FMI function names")
+                    # once more, with the standard names as aliases of the prefixed ones
                     shutil.rmtree(work / "build")
                     (work / "build").mkdir()
                     build_platform_binary(work / "fmu", build_dir=work / "build",
