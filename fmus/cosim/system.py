@@ -306,9 +306,12 @@ def _compiled(fmu: Path, where: str) -> Path:
                         break
                     if attempt == 2:
                         raise RuntimeError("the binary built from them exports only prefixed FMI function names")
-                    # once more, with the standard names as aliases of the prefixed ones
+                    # once more, with the standard names as aliases of the prefixed ones; the binary
+                    # built first goes, or cmake's install may keep it as "up to date"
                     shutil.rmtree(work / "build")
                     (work / "build").mkdir()
+                    for so in (work / "fmu" / "binaries").rglob("*.so"):
+                        so.unlink()
                     build_platform_binary(work / "fmu", build_dir=work / "build",
                                           cmake_options={"CMAKE_SHARED_LINKER_FLAGS": aliases})
         except Exception as exc:  # noqa: BLE001 - cmake, the compiler, a bad build description
