@@ -754,11 +754,14 @@ def run(system: System, master: str = "jacobi", sinks: Sequence[Sink] = (), prog
     if master not in MASTERS:
         raise UserError(f"unknown master {master!r}; choose one of {', '.join(MASTERS)}")
     if master == "container":
+        from railfmu.fmus.cosim import native_loop
         from railfmu.fmus.cosim.trial import container_refusal
 
+        if native_loop.takes(system):  # all FMI 2.0: our C loop, no trial (it calls as jacobi does)
+            return native_loop.run_native(system, sinks, progress)
         others = [f"{c.name} (FMI {c.md.fmiVersion})" for c in system.components
                   if str(c.md.fmiVersion) not in ("2.0", "3.0")]
-        why = (f"FMPy's container FMU takes FMI 2.0 and 3.0 components, not {', '.join(others)}"
+        why = (f"the container master takes FMI 2.0 and 3.0 components, not {', '.join(others)}"
                if others else container_refusal(system, _run_container))
         if why is None:
             return _run_container(system, sinks, progress)
