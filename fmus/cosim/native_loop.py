@@ -52,6 +52,7 @@ from railfmu.fmus.cosim.masters import (
 )
 from railfmu.fmus.cosim.slave import Slave, Status
 from railfmu.fmus.cosim.system import Sink, System, carried_type, check_system, recorded_signals
+from railfmu.models.errors import UserError
 
 LOOP_SOURCE = Path(__file__).parent.parent / "native" / "host" / "coupling_loop.c"
 NOTE = ("container master: the FMUs coupled like Jacobi by a C loop over their own fmi2 functions "
@@ -167,7 +168,11 @@ def run_native(system: System, sinks: Sequence[Sink], progress: bool) -> RunResu
             s = slaves[comp.name] = Slave(comp.fmu, comp.name, md=comp.md)
             s.enter_initialization(start, fmu_stop_time(stop, h))
             for name, value in comp.parameters.items():
-                s.set(name, value)
+                try:
+                    s.set(name, value)
+                except (TypeError, ValueError):  # Slave.set converts the value before any FMI call
+                    raise UserError(f"{comp.name}.{name}: {value!r} is not a valid {s.var(name).type} "
+                                    "value") from None
         fmus = {name: _Fmu(s) for name, s in slaves.items()}
         links = _links(list(system.connections), fmus)
         record = recorded_signals(system)
