@@ -16,11 +16,15 @@ What is asserted (and measured when this was written):
 * the CSV recorder writes n_steps + 1 rows that read back to the result exactly; a run
   stopped by an overflow (factor 1e308 on xi, a 1 mm step at t = 1 s) raises UserError
   naming wheelset.ddy at t = 1 s and leaves a readable CSV of the rows before it;
-* the container refuses a non-identity connection, suggesting --master jacobi;
+* the container master (a C loop over the FMUs' own fmi2 functions on FMI 2.0 systems) runs a
+  LinearTransformation (factor and offset) to Jacobi's samples bit for bit, names the inner
+  component of a failed call as Jacobi does, hands a sink that sets every_step each row
+  alone; FMPy's container (the exported FMU) refuses a non-identity connection, suggesting
+  --master jacobi;
 * Monte Carlo members (lateral_alignment, two seeds, and Integer and Boolean values other
-  than the variant's) share one cached container folder, which holds the FMUs' own start
-  values, and each run equals its Jacobi run bit for bit; a refused value is the same one
-  line as before the values left the cache key;
+  than the variant's) equal their Jacobi runs bit for bit in the container master and in
+  FMPy's container path, which shares one cached container folder holding the FMUs' own
+  start values; a refused value is one line;
 * the exported container (build_container) carries the values as start values: FMPy's
   simulate_fmu runs it alone to the Jacobi samples bit for bit.
 """
@@ -87,9 +91,12 @@ def test_container_with_string_parameter(fmu_dir):
 
 def test_monte_carlo_members_share_one_cached_container(tmp_path, monkeypatch):
     # lateral_alignment (Muñoz et al.) with two seeds: TrackIrregularity.seed and
-    # SensorNoise.seed change, and Real, Integer and Boolean parameters are bound. The cache
-    # holds one folder, without the runs' values; each container run equals its Jacobi run.
+    # SensorNoise.seed change, and Real, Integer and Boolean parameters are bound. The
+    # container master (the C loop: no container folder at all) and FMPy's container path
+    # (systems with FMI 3.0 components; here run directly) equal the Jacobi run bit for bit;
+    # FMPy's cache holds one folder, without the runs' values.
     from railfmu.experiments.engine.runner import find_experiment, load_system
+    from railfmu.fmus.cosim.masters import _run_container
 
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
     monkeypatch.delenv("RAILFMU_CACHE", raising=False)  # it would win over XDG_CACHE_HOME
@@ -99,12 +106,15 @@ def test_monte_carlo_members_share_one_cached_container(tmp_path, monkeypatch):
     sets = {11: None, 12: None, "other": {"sensors": {"enabled": "false"}, "track": {"psd_level": "2"}}}
     for key, overrides in sets.items():
         system = load_system(exp, "standard", overrides, seed=11 if key == "other" else key, stop_time=0.3)
-        runs[key] = run(system, "jacobi", progress=False), run(system, "container", progress=False)
+        native = run(system, "container", progress=False)
+        assert runs or not (tmp_path / "railfmu" / "containers").exists()
+        runs[key] = run(system, "jacobi", progress=False), _run_container(system, (), False), native
     folders = sorted((tmp_path / "railfmu" / "containers").iterdir())
     assert len(folders) == 1
-    for jac, con in runs.values():
-        assert con.columns == jac.columns and len(con.data) == 301
+    for jac, con, native in runs.values():
+        assert con.columns == jac.columns == native.columns and len(con.data) == 301
         np.testing.assert_array_equal(con.data, jac.data)
+        np.testing.assert_array_equal(native.data, jac.data)
     # the values reached the FMUs: other track and other noise
     a, b, c = (runs[k][1] for k in sets)
     for signal in ("track.alignment_1", "sensors.y_1"):
@@ -136,19 +146,51 @@ def test_exported_container_runs_alone_with_the_values(fmu_dir, tmp_path):
         np.testing.assert_array_equal(alone[signal], col(jac, signal))
 
 
-def test_container_refuses_affine_connection(fmu_dir):
+def test_container_runs_affine_connections_as_jacobi(fmu_dir, tmp_path):
+    # the C loop computes factor * src + offset in double as Python does (no fma): bit for bit;
+    # FMPy's container (the exported FMU, the path of FMI 3.0 systems) copies values unchanged
+    # and refuses the map
+    from railfmu.fmus.cosim.container import build_container
+
+    system = track_wheelset(fmu_dir, factor=1.1, stop_time=0.5)  # not a power of 2: factor * src rounds
+    system.connections[1].offset = 1e-4 / 3
+    jac, con = run(system, "jacobi", progress=False), run(system, "container", progress=False)
+    assert con.master == "container" and not con.early_end
+    np.testing.assert_array_equal(con.data, jac.data)
     with pytest.raises(UserError, match=r"track\.alignment_1 -> wheelset\.xi.*--master jacobi"):
-        run(track_wheelset(fmu_dir, factor=2.0), "container", progress=False)
+        build_container(system, tmp_path / "affine.fmu")
 
 
 def test_container_reports_a_bad_parameter(fmu_dir):
     # the value is set in initialisation mode; the track refuses it when leaving it
     with pytest.raises(UserError) as err:
         run(track_wheelset(fmu_dir, track={"psd_level": 7}), "container", progress=False)
-    assert str(err.value) == ("track_wheelset.fmu (track_wheelset): fmi2ExitInitializationMode failed: "
-                              "parameter psd_level = 7 must be 0, 1 or 2")
+    assert str(err.value) == ("TrackIrregularity.fmu (track): fmi2ExitInitializationMode failed: "
+                              "parameter psd_level = 7 must be 0, 1 or 2")  # the component, as jacobi says it
     with pytest.raises(UserError, match=r"^track\.psd_level: 'two' is not a valid Integer value$"):
         run(track_wheelset(fmu_dir, track={"psd_level": "two"}), "container", progress=False)
+
+
+class EveryStep(ArrayRecorder):
+    """A sink that must see every row before the next step: the size of every block it gets."""
+
+    every_step = True
+
+    def __init__(self):
+        super().__init__()
+        self.blocks = []
+
+    def write_block(self, rows):
+        self.blocks.append(len(rows))
+        super().write_block(rows)
+
+
+def test_container_hands_an_every_step_sink_each_row(fmu_dir, results):
+    sink = EveryStep()
+    res = run(track_wheelset(fmu_dir), "container", sinks=[sink], progress=False)
+    assert sink.blocks == [1] * 2001 and sink.complete is True
+    np.testing.assert_array_equal(sink.data, results["jacobi"].data)
+    np.testing.assert_array_equal(res.data, results["jacobi"].data)
 
 
 def test_gauss_seidel_exact_where_nothing_is_coupled(fmu_dir, results):
@@ -210,6 +252,9 @@ def test_algebraic_loop_is_refused(fmu_dir):
         gauss_seidel_order(system, {"a": md, "b": md})
     with pytest.raises(UserError, match=msg):
         run(system, "gauss-seidel", progress=False)
+    # Jacobi couples it with one step of delay, and the container master with it
+    np.testing.assert_array_equal(run(system, "container", progress=False).data,
+                                  run(system, "jacobi", progress=False).data)
 
 
 def test_cycle_without_feedthrough_is_broken(fmu_dir):
@@ -241,7 +286,7 @@ def test_csv_recorder_and_array_recorder(fmu_dir, tmp_path, results):
     np.testing.assert_array_equal(mem2.data, res.data)
 
 
-@pytest.mark.parametrize("master", ["jacobi", "gauss-seidel"])
+@pytest.mark.parametrize("master", MASTERS)
 def test_non_finite_stops_the_run_and_keeps_the_csv(fmu_dir, tmp_path, master):
     # xi = 1e308 * (1 mm step at t = 1 s): finite, but ddy = D xi overflows
     system = track_wheelset(fmu_dir, track={"psd_level": 0, "step_lateral": 1e-3, "step_position": 20.0})
@@ -249,7 +294,7 @@ def test_non_finite_stops_the_run_and_keeps_the_csv(fmu_dir, tmp_path, master):
     sink, mem = CsvRecorder(tmp_path / "signals.csv"), ArrayRecorder()
     with pytest.raises(UserError, match=r"wheelset|WheelsetLateral") as err:
         run(system, master, sinks=[sink, mem], progress=False)
-    if master == "jacobi":
+    if master != "gauss-seidel":
         assert str(err.value).startswith("wheelset.ddy = inf at t = 1 s: a non-finite value left an FMU")
     assert sink.complete is False and mem.complete is False
     with open(tmp_path / "signals.csv", newline="") as f:
@@ -260,11 +305,15 @@ def test_non_finite_stops_the_run_and_keeps_the_csv(fmu_dir, tmp_path, master):
     assert np.isfinite(data).all()
 
 
-def test_nan_offset_is_refused_by_the_fmu(fmu_dir):
+@pytest.mark.parametrize("master", ["jacobi", "container"])
+def test_nan_offset_is_refused_by_the_fmu(fmu_dir, master):
     system = track_wheelset(fmu_dir)
     system.connections[0].offset = math.nan
-    with pytest.raises(UserError, match=r"wheelset.*track\.alignment_1 -> wheelset\.xi.*not finite"):
-        run(system, "jacobi", progress=False)
+    with pytest.raises(UserError) as err:
+        run(system, master, progress=False)
+    assert str(err.value).startswith("WheelsetLateral.fmu (wheelset): fmi2SetReal of track.alignment_1 -> "
+                                     "wheelset.xi, track.alignment_rate_1 -> wheelset.xi_rate at t = 0 s failed: ")
+    assert "not finite" in str(err.value)
 
 
 class Interrupting(ArrayRecorder):

@@ -163,13 +163,18 @@ def test_stair_is_a_valid_fmu(stair):
 
 
 def test_container_without_c_compiler_gives_the_same_rows(stair, monkeypatch):
-    """The ctypes loop that replaces the C driver: same Integer/Boolean rows, same early end."""
+    """Without a C compiler the container master runs the Jacobi master's Python loop, and
+    FMPy's container path (systems with FMI 3.0 components) the ctypes loop that replaces its
+    C driver: same Integer/Boolean rows, same early end."""
     import railfmu.fmus.cosim.container as container
+    import railfmu.fmus.cosim.native_loop as native_loop
+    from railfmu.fmus.cosim.masters import _run_container
 
     system = pair(stair)
     jac = run(system, "jacobi", progress=False)
+    monkeypatch.setattr(native_loop, "load_loop", lambda: None)
     monkeypatch.setattr(container, "load_driver", lambda: None)
-    con = run(system, "container", progress=False)
-    assert any("no C compiler" in n for n in con.notes)
-    assert con.early_end == jac.early_end and con.end_time == 9.0
-    np.testing.assert_array_equal(con.data, jac.data)
+    for con in (run(system, "container", progress=False), _run_container(system, (), False)):
+        assert con.master == "container" and any("no C compiler" in n for n in con.notes)
+        assert con.early_end == jac.early_end and con.end_time == 9.0
+        np.testing.assert_array_equal(con.data, jac.data)

@@ -1,4 +1,7 @@
-"""The native fast path: the whole system as one FMPy container FMU (``fmpy.container_fmu``).
+"""The whole system as one FMPy container FMU (``fmpy.container_fmu``): a single FMU of the
+system for other tools (:func:`build_container`), and the container master's path for a
+system with an FMI 3.0 component (FMI 2.0 systems run in the master's own C loop,
+:mod:`railfmu.fmus.cosim.native_loop`, which is faster to set up and takes affine maps).
 
 FMPy's container is a Rust binary that loads the components' FMUs and couples them itself,
 driven by a JSON configuration; :func:`build_container` writes it from a :class:`System`:

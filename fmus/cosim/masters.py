@@ -19,10 +19,15 @@ Three masters, one time grid ``t_k = start + k h`` (k = 0 .. n), one sample per 
     its output) is refused: Gauss-Seidel does not iterate.
 
 ``container``
-    The system as one FMPy container FMU (:mod:`railfmu.fmus.cosim.container`), stepped by a small C loop
-    (doStep + getReal into a numpy buffer; a ctypes loop without a C compiler). The
-    container couples like Jacobi, and its samples equal the ``jacobi`` master's bit for bit
-    (asserted by tests/test_masters.py); see :mod:`railfmu.fmus.cosim.container`.
+    Jacobi's coupling without Python in the loop. A system of FMI 2.0 FMUs runs in a C loop of
+    our own (:mod:`railfmu.fmus.cosim.native_loop`): the FMUs loaded and initialised as the
+    Jacobi master does it, then coupled, sampled and stepped 1000 rows per call through their
+    own fmi2 functions, LinearTransformations included; no trial run (it makes the Jacobi
+    master's calls). A system with an FMI 3.0 component runs as one FMPy container FMU
+    (:mod:`railfmu.fmus.cosim.container`, :func:`_run_container`) stepped by a small C driver,
+    after a trial in a child process when an FMU is not railfmu's
+    (:mod:`railfmu.fmus.cosim.trial`). Either way the samples equal the ``jacobi`` master's bit
+    for bit (asserted by tests/test_masters.py).
 
 What a sample at t_k holds, for every master: every FMU has stepped to t_k (Gauss-Seidel:
 with its own coupling); then every connection has been copied from the outputs at t_k
@@ -44,16 +49,17 @@ build ctypes arrays on every call), and each Real sample lands straight in the p
 result array.
 
 FMI 1.0, 2.0 and 3.0 Co-Simulation FMUs run in the Python masters alike (through
-:class:`railfmu.fmus.cosim.slave.Slave`); FMPy's container takes FMI 2.0 and 3.0 components
+:class:`railfmu.fmus.cosim.slave.Slave`); the container master takes FMI 2.0 and 3.0 components
 (its samples equal Jacobi's for both) and hands a system with an FMI 1.0 FMU to ``jacobi``,
 which couples the same way. FMI 2.0 status semantics, in every master: ``fmi2Discard`` from ``fmi2DoStep`` followed by
 ``fmi2GetBooleanStatus(fmi2Terminated) = true`` ends the run normally at that communication
 point (``RunResult.early_end``; every row up to it is there and the sinks close as
 complete); any other ``fmi2Discard``, ``fmi2Error`` or ``fmi2Fatal`` is an error naming the
 component and the status (``X.fmu (name): what failed: <what the FMU logged, or the status>``,
-the wording of :class:`railfmu.fmus.cosim.slave.Slave`). The container reports one status for all
-its components, so on either the run up to that step is replayed with the Jacobi master
-(same samples, bit for bit) to name the inner component. FMI 3.0: ``terminateSimulation``
+the wording of :class:`railfmu.fmus.cosim.slave.Slave`; the container master's C loop says which
+call of which component failed, so its words are Jacobi's). FMPy's container reports one
+status for all its components, so on either the run up to that step is replayed with the
+Jacobi master (same samples, bit for bit) to name the inner component. FMI 3.0: ``terminateSimulation``
 from ``fmi3DoStep`` ends the run the same way; FMI 1.0 has no terminate status, so any
 ``fmiDiscard`` is an error.
 """
@@ -80,7 +86,7 @@ MASTERS = ("jacobi", "gauss-seidel", "container")
 #: when the Jacobi master reads a row (:func:`run`'s ``sampling``): after every connection is
 #: copied (the default, every master), or right after the step, before any input is set
 SAMPLINGS = ("after-transfer", "before-transfer")
-BLOCK_ROWS = 1000  # container path: rows per C call / per write_block
+BLOCK_ROWS = 1000  # container master: rows per C call / per write_block
 HAND_OVER_ROWS = 500  # Python masters: rows checked (finite) and handed to the sinks at once (observers are passive); 1 if a sink sets every_step
 
 _c_uint_p = ctypes.POINTER(ctypes.c_uint)
@@ -580,7 +586,7 @@ def _run_python(system: System, master: str, sinks: Sequence[Sink], progress: bo
                      step_size=h, step_size_from=system.step_size_from)
 
 
-# -- the container master --------------------------------------------------------------------
+# -- FMPy's container: the container master on systems with FMI 3.0 components --------------
 
 class _Signals(ctypes.Structure):
     """``Signals`` of fmus/native/runtime/container_driver.c."""
@@ -595,6 +601,8 @@ DRIVER_OK, DRIVER_DO_STEP_FAILED, DRIVER_GET_FAILED, DRIVER_NON_FINITE, DRIVER_T
 
 
 def _run_container(system: System, sinks: Sequence[Sink], progress: bool) -> RunResult:
+    """``system`` as one FMPy container FMU stepped by the C driver (FMI 2.0 and 3.0 components;
+    identity connections only); FMI 2.0 systems take :mod:`railfmu.fmus.cosim.native_loop`."""
     from railfmu.fmus.cosim.container import (
         ContainerSlave,
         apply_parameters,
@@ -773,7 +781,7 @@ def run(system: System, master: str = "jacobi", sinks: Sequence[Sink] = (), prog
 
     Sinks get ``open(columns)``, then the rows (``write_block``: the Python masters every
     :data:`HAND_OVER_ROWS` steps, or every step when a sink sets ``every_step``; the container
-    per C call), then ``close(complete)``. An FMU that ends
+    per C call, every step for such a sink in its C loop), then ``close(complete)``. An FMU that ends
     the simulation (fmi2Discard + fmi2Terminated) ends the run normally at that communication
     point: ``RunResult.early_end`` says who and when, the sinks close as complete. On an error
     (UserError: a failed FMU call with what the FMU logged, a non-finite sample) or
@@ -790,11 +798,14 @@ def run(system: System, master: str = "jacobi", sinks: Sequence[Sink] = (), prog
                             f"(the {master} master samples after it); use --master jacobi")
         return _run_python(system, master, sinks, progress, sampling=sampling)
     if master == "container":
+        from railfmu.fmus.cosim import native_loop
         from railfmu.fmus.cosim.trial import container_refusal
 
+        if native_loop.takes(system):  # all FMI 2.0: our C loop, no trial (it calls as jacobi does)
+            return native_loop.run_native(system, sinks, progress)
         others = [f"{c.name} (FMI {c.md.fmiVersion})" for c in system.components
                   if str(c.md.fmiVersion) not in ("2.0", "3.0")]
-        why = (f"FMPy's container FMU takes FMI 2.0 and 3.0 components, not {', '.join(others)}"
+        why = (f"the container master takes FMI 2.0 and 3.0 components, not {', '.join(others)}"
                if others else container_refusal(system, _run_container))
         if why is None:
             return _run_container(system, sinks, progress)

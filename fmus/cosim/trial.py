@@ -7,6 +7,11 @@ FMU railfmu did not build gets a short trial run of the container in a child pro
 (a few steps, no sinks); if the child dies or fails, :func:`container_refusal` says why and
 the caller runs the Jacobi master instead. railfmu's own FMUs are tested with the container
 and skip the trial.
+
+Only systems with an FMI 3.0 component reach FMPy's container now. An FMI 2.0 system runs in
+the container master's own C loop (:mod:`railfmu.fmus.cosim.native_loop`), which calls the
+FMUs as the Jacobi master does and, like that master, needs no trial: the crane demo runs
+there.
 """
 
 from __future__ import annotations
