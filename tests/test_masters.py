@@ -377,3 +377,12 @@ def test_sampling_before_the_transfer_is_the_jacobi_masters(fmu_dir, master):
         run(track_wheelset(fmu_dir), master, progress=False, sampling="before-transfer")
     with pytest.raises(UserError, match="unknown sampling"):
         run(track_wheelset(fmu_dir), "jacobi", progress=False, sampling="after-step")
+
+
+@pytest.mark.parametrize("master", MASTERS)
+def test_a_parameter_value_of_the_wrong_type_is_one_line(fmu_dir, master):
+    """A System built in Python with a value its variable cannot take: a UserError naming the
+    FMU, the variable and the value, in every master (never a traceback from a conversion)."""
+    system = track_wheelset(fmu_dir, track={**TRACK, "psd_level": "two"}, stop_time=0.01)
+    with pytest.raises(UserError, match=r"TrackIrregularity.fmu \(track\).*psd_level = 'two' is not a valid Integer"):
+        run(system, master, progress=False)

@@ -250,7 +250,16 @@ class Slave:
             setter, conv = {"Real": (f.setReal, float), "Integer": (f.setInteger, int),
                             "Enumeration": (f.setInteger, int),  # FMI 1.0/2.0 set an Enumeration as an Integer
                             "Boolean": (f.setBoolean, bool), "String": (f.setString, str)}[v.type]
-        self.call(f"setting {name}", setter, [v.valueReference], [conv(value)])
+        try:
+            if conv is bool and isinstance(value, str):  # bool("false") is True
+                if value.strip().lower() not in ("true", "false", "1", "0"):
+                    raise ValueError(value)
+                typed = value.strip().lower() in ("true", "1")
+            else:
+                typed = conv(value)
+        except (TypeError, ValueError, OverflowError):
+            raise UserError(f"{self.path.name} ({self.name}): {name} = {value!r} is not a valid {v.type} value") from None
+        self.call(f"setting {name}", setter, [v.valueReference], [typed])
 
     def get(self, name: str):
         v = self.var(name)
