@@ -168,11 +168,7 @@ def run_native(system: System, sinks: Sequence[Sink], progress: bool) -> RunResu
             s = slaves[comp.name] = Slave(comp.fmu, comp.name, md=comp.md)
             s.enter_initialization(start, fmu_stop_time(stop, h))
             for name, value in comp.parameters.items():
-                try:
-                    s.set(name, value)
-                except (TypeError, ValueError):  # Slave.set converts the value before any FMI call
-                    raise UserError(f"{comp.name}.{name}: {value!r} is not a valid {s.var(name).type} "
-                                    "value") from None
+                s.set(name, value)
         fmus = {name: _Fmu(s) for name, s in slaves.items()}
         links = _links(list(system.connections), fmus)
         record = recorded_signals(system)
