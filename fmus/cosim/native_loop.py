@@ -52,7 +52,6 @@ from railfmu.fmus.cosim.masters import (
 )
 from railfmu.fmus.cosim.slave import Slave, Status
 from railfmu.fmus.cosim.system import Sink, System, carried_type, check_system, recorded_signals
-from railfmu.models.errors import UserError
 
 LOOP_SOURCE = Path(__file__).parent.parent / "native" / "host" / "coupling_loop.c"
 NOTE = ("container master: the FMUs coupled like Jacobi by a C loop over their own fmi2 functions "
