@@ -8,6 +8,7 @@ from __future__ import annotations
 import ctypes
 import hashlib
 import os
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -26,8 +27,8 @@ def cache_cold(dispatcher) -> bool:
 
 
 def _note(what: str, how: str) -> None:
-    if what not in _noted:
-        _noted.add(what)
+    if f"{what} {how}" not in _noted:
+        _noted.add(f"{what} {how}")
         print(f"railfmu: compiling the {what} kernel with {how} (once per machine, then cached)",
               file=sys.stderr, flush=True)
 
@@ -35,11 +36,11 @@ def _note(what: str, how: str) -> None:
 def cache_note(what: str, *dispatchers) -> None:
     """Print ``railfmu: compiling the <what> kernel ...`` once per process if any of
     ``dispatchers`` is about to be compiled rather than loaded."""
-    if what in _noted:
+    if f"{what} numba" in _noted:
         return
     if any(cache_cold(d) for d in dispatchers):
         _note(what, "numba")
-    _noted.add(what)
+    _noted.add(f"{what} numba")
 
 
 def cache_root() -> Path:
@@ -64,6 +65,8 @@ def shared_library(source: Path, what: str) -> ctypes.CDLL | None:
     (``what`` names the kernel). None when there is no working compiler or the cache is not
     writable: the caller falls back."""
     cc = os.environ.get("CC") or "gcc"
+    if shutil.which(cc) is None:
+        return None
     src = source.read_bytes()
     key = hashlib.sha256(src + " ".join((cc, *C_FLAGS)).encode()).hexdigest()[:16]
     lib = cache_root() / "kernels" / f"{source.stem}-{key}.so"
