@@ -65,13 +65,12 @@ def shared_library(source: Path, what: str) -> ctypes.CDLL | None:
     (``what`` names the kernel). None when there is no working compiler or the cache is not
     writable: the caller falls back."""
     cc = os.environ.get("CC") or "gcc"
-    if shutil.which(cc) is None:
-        return None
-    src = source.read_bytes()
-    key = hashlib.sha256(src + " ".join((cc, *C_FLAGS)).encode()).hexdigest()[:16]
-    lib = cache_root() / "kernels" / f"{source.stem}-{key}.so"
     try:
+        key = hashlib.sha256(source.read_bytes() + " ".join((cc, *C_FLAGS)).encode()).hexdigest()[:16]
+        lib = cache_root() / "kernels" / f"{source.stem}-{key}.so"
         if not lib.is_file():
+            if shutil.which(cc) is None:
+                return None
             lib.parent.mkdir(parents=True, exist_ok=True)
             tmp = lib.with_suffix(f".{os.getpid()}.tmp")
             _note(what, Path(cc).name)
@@ -82,5 +81,5 @@ def shared_library(source: Path, what: str) -> ctypes.CDLL | None:
                 return None
             os.replace(tmp, lib)
         return ctypes.CDLL(str(lib))
-    except OSError:  # no compiler, a read-only cache, a library that does not load
+    except OSError:  # no source, a read-only cache, a library that does not load
         return None
