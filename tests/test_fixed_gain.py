@@ -30,7 +30,7 @@ def test_c_kernel_equals_the_numpy_loop_and_numba_bit_for_bit():
     assert bf is not None and bf._kind == "c"
     from railfmu.estimators.core import fixed_gain_numba
 
-    assert fixed_gain_numba.bound()
+    fixed_gain_numba.bind(*fixed_gain._dgemv)
     nb = fixed_gain.BlockFilter(F, H, K, ("numba", fixed_gain_numba))
     Z = np.random.default_rng(3).standard_normal((3000, 3)) * [0.3, 0.01, 0.05]
     ref = np.empty((3000, 7))

@@ -56,12 +56,11 @@ _kernel = None  # ("c", function) | ("numba", module) once loaded; False: neithe
 
 
 def _load_kernel():
-    """The C kernel, else the numba one, else None; looked for once per process.
-    ``RAILFMU_FIXED_GAIN_KERNEL=numba`` skips the C one (tests of the fallback)."""
+    """The C kernel, else the numba one, else None; looked for once per process."""
     global _kernel
     if _kernel is None:
         _kernel = False
-        lib = None if os.environ.get("RAILFMU_FIXED_GAIN_KERNEL") == "numba" else shared_library(_SOURCE, _WHAT)
+        lib = shared_library(_SOURCE, _WHAT)
         if lib is not None:
             fn = getattr(lib, f"railfmu_fixed_gain{_dgemv[1]}")
             p, i, n = ctypes.c_void_p, ctypes.c_int, ctypes.c_long
@@ -74,8 +73,8 @@ def _load_kernel():
             except ImportError:  # no numba: the caller loops in numpy
                 pass
             else:
-                if fixed_gain_numba.bound():
-                    _kernel = ("numba", fixed_gain_numba)
+                fixed_gain_numba.bind(*_dgemv)
+                _kernel = ("numba", fixed_gain_numba)
     return _kernel or None
 
 

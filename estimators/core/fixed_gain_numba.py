@@ -8,33 +8,24 @@ import numba
 import numpy as np
 
 from railfmu.estimators.core.compiled import cache_note
-from railfmu.estimators.core.fixed_gain import _dgemv as _address
 
 _TRANS = 112
 _SYMBOL = "railfmu_numpy_dgemv"
+_dgemv = None  # numpy's cblas_dgemv as a numba external function, once bound
 
 
-def _bind():
-    if _address is None:
-        return None
-    from llvmlite import binding as llvm
-
-    address, bits = _address
-    llvm.add_symbol(_SYMBOL, address)
-    i, f, p = (numba.types.int64 if bits == 64 else numba.types.int32), numba.types.float64, numba.types.intp
-    return numba.types.ExternalFunction(_SYMBOL, numba.types.void(numba.types.int32, numba.types.int32, i, i, f, p,
-                                                                  i, p, i, f, p, i))
-
-
-_dgemv = _bind()
-
-
-def bound() -> bool:
-    """True if the kernel can run here (numpy's BLAS found); loads (or compiles) it."""
+def bind(address: int, bits: int) -> None:
+    """Bind numpy's ``cblas_dgemv`` (its address and integer width in bits) for the kernel,
+    then load (or, once per machine, compile, and say so) the kernel."""
+    global _dgemv
     if _dgemv is None:
-        return False
+        from llvmlite import binding as llvm
+
+        llvm.add_symbol(_SYMBOL, address)
+        i, f, p = (numba.types.int64 if bits == 64 else numba.types.int32), numba.types.float64, numba.types.intp
+        _dgemv = numba.types.ExternalFunction(_SYMBOL, numba.types.void(numba.types.int32, numba.types.int32, i, i, f,
+                                                                        p, i, p, i, f, p, i))
     cache_note("fixed-gain filter", _run)
-    return True
 
 
 @numba.njit(cache=True)
