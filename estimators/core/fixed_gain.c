@@ -12,14 +12,30 @@
 
 #define TRANS 112 /* CblasTrans */
 
+/* The matrices of one filter, set once (fixed_gain.BlockFilter); order and lda as numpy's `@`
+ * passes them for the array's layout. */
+struct railfmu_fixed_gain {
+    void *gemv; /* numpy's cblas_dgemv */
+    const double *F;
+    int fo;
+    long fl;
+    const double *H;
+    int ho;
+    long hl;
+    const double *K;
+    int ko;
+    long kl;
+    long n, m; /* states, rows of H */
+};
+
 #define FIXED_GAIN(NAME, BLASINT)                                                                    \
     typedef void (*NAME##_gemv)(int, int, BLASINT, BLASINT, double, const double *, BLASINT,         \
                                 const double *, BLASINT, double, double *, BLASINT);                 \
-    int NAME(void *gemv, const double *F, int fo, long fl, const double *H, int ho, long hl,         \
-             const double *K, int ko, long kl, long n, long m, double *x, const double *Z, long rows, \
-             long nz, double *out, long out_row, long out_col)                                       \
+    int NAME(const struct railfmu_fixed_gain *c, double *x, const double *Z, long rows, long nz,     \
+             double *out, long out_row, long out_col)                                                \
     {                                                                                                \
-        NAME##_gemv mv = (NAME##_gemv)gemv;                                                          \
+        NAME##_gemv mv = (NAME##_gemv)c->gemv;                                                       \
+        long n = c->n, m = c->m;                                                                     \
         double *xp = malloc(sizeof(double) * (size_t)(2 * n + 3 * m + 1));                           \
         if (xp == NULL)                                                                              \
             return -1;                                                                               \
@@ -27,13 +43,13 @@
         for (long j = 0; j < m; j++)                                                                 \
             zb[j] = 0.0; /* rows beyond Z's columns: a virtual reading of 0 */                       \
         for (long k = 0; k < rows; k++) {                                                            \
-            mv(fo, TRANS, (BLASINT)n, (BLASINT)n, 1.0, F, (BLASINT)fl, x, 1, 0.0, xp, 1);            \
+            mv(c->fo, TRANS, (BLASINT)n, (BLASINT)n, 1.0, c->F, (BLASINT)c->fl, x, 1, 0.0, xp, 1);   \
             for (long j = 0; j < nz; j++)                                                            \
                 zb[j] = Z[k * nz + j];                                                               \
-            mv(ho, TRANS, (BLASINT)n, (BLASINT)m, 1.0, H, (BLASINT)hl, xp, 1, 0.0, hx, 1);           \
+            mv(c->ho, TRANS, (BLASINT)n, (BLASINT)m, 1.0, c->H, (BLASINT)c->hl, xp, 1, 0.0, hx, 1);  \
             for (long j = 0; j < m; j++)                                                             \
                 nu[j] = zb[j] - hx[j];                                                               \
-            mv(ko, TRANS, (BLASINT)m, (BLASINT)n, 1.0, K, (BLASINT)kl, nu, 1, 0.0, kn, 1);           \
+            mv(c->ko, TRANS, (BLASINT)m, (BLASINT)n, 1.0, c->K, (BLASINT)c->kl, nu, 1, 0.0, kn, 1);  \
             double *o = out + k * out_row;                                                           \
             for (long j = 0; j < n; j++) {                                                           \
                 x[j] = xp[j] + kn[j];                                                                \

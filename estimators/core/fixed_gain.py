@@ -55,6 +55,14 @@ _dgemv = None if os.environ.get("RAILFMU_NO_BLAS_KERNEL") else _numpy_dgemv()
 _kernel = None  # ("c", function) | ("numba", module) once loaded; False: neither
 
 
+class _Matrices(ctypes.Structure):
+    """``struct railfmu_fixed_gain`` of fixed_gain.c."""
+
+    _fields_ = [("gemv", ctypes.c_void_p), ("F", ctypes.c_void_p), ("fo", ctypes.c_int), ("fl", ctypes.c_long),
+                ("H", ctypes.c_void_p), ("ho", ctypes.c_int), ("hl", ctypes.c_long), ("K", ctypes.c_void_p),
+                ("ko", ctypes.c_int), ("kl", ctypes.c_long), ("n", ctypes.c_long), ("m", ctypes.c_long)]
+
+
 def _load_kernel():
     """The C kernel, else the numba one, else None; looked for once per process."""
     global _kernel
@@ -63,8 +71,8 @@ def _load_kernel():
         lib = shared_library(_SOURCE, _WHAT)
         if lib is not None:
             fn = getattr(lib, f"railfmu_fixed_gain{_dgemv[1]}")
-            p, i, n = ctypes.c_void_p, ctypes.c_int, ctypes.c_long
-            fn.argtypes = [p, p, i, n, p, i, n, p, i, n, n, n, p, p, n, n, p, n, n]
+            p, n = ctypes.c_void_p, ctypes.c_long
+            fn.argtypes = [ctypes.POINTER(_Matrices), p, p, n, n, p, n, n]
             fn.restype = ctypes.c_int
             _kernel = ("c", fn)
         else:
@@ -112,8 +120,10 @@ class BlockFilter:
         self._kind, self._fn = kernel or _load_kernel()
         if self._kind == "c":
             (fo, fl), (ho, hl), (ko, kl) = self._lay
-            self._args = (_dgemv[0], F.ctypes.data, fo, fl, H.ctypes.data, ho, hl, K.ctypes.data, ko, kl,
-                          F.shape[0], H.shape[0])
+            self._c = _Matrices(_dgemv[0], F.ctypes.data, fo, fl, H.ctypes.data, ho, hl, K.ctypes.data, ko, kl,
+                                F.shape[0], H.shape[0])
+            self._cref = ctypes.byref(self._c)
+            self._x = self._xp = None  # the last state vector and its address (one array across blocks)
 
     def run(self, x: np.ndarray, Z: np.ndarray, out: np.ndarray) -> None:
         Z = np.ascontiguousarray(Z, dtype=np.float64)
@@ -121,15 +131,20 @@ class BlockFilter:
             (fo, fl), (ho, hl), (ko, kl) = self._lay
             self._fn._run(self.F, fo, fl, self.H, ho, hl, self.K, ko, kl, x, Z, out)
             return
-        n = self.F.shape[0]
-        xs = x if x.dtype == np.float64 and x.flags.c_contiguous and x.shape == (n,) else np.array(x, dtype=np.float64)
+        n, rows = self._c.n, Z.shape[0]
+        xs = x
+        if x is not self._x:
+            if x.dtype == np.float64 and x.flags.c_contiguous and x.flags.writeable and x.shape == (n,):
+                self._x, self._xp = x, x.ctypes.data
+            else:  # worked on a copy
+                xs = np.array(x, dtype=np.float64)
         o = out
-        if (out.dtype != np.float64 or not out.flags.writeable or out.shape != (Z.shape[0], n)
-                or any(s % 8 for s in out.strides)):
-            o = np.empty((Z.shape[0], n))
-        if self._fn(*self._args, xs.ctypes.data, Z.ctypes.data, Z.shape[0], Z.shape[1], o.ctypes.data,
-                    o.strides[0] // 8, o.strides[1] // 8) != 0:
-            raise MemoryError("fixed-gain filter: no memory for 2 n + 3 m numbers")
+        if (out.dtype != np.float64 or out.shape != (rows, n) or not out.flags.writeable
+                or out.strides[0] % 8 or out.strides[1] % 8):
+            o = np.empty((rows, n))
+        if self._fn(self._cref, self._xp if xs is x else xs.ctypes.data, Z.ctypes.data, rows, Z.shape[1],
+                    o.ctypes.data, o.strides[0] // 8, o.strides[1] // 8) != 0:
+            raise MemoryError("fixed-gain filter: no memory for the scratch vectors")
         if xs is not x:
             x[...] = xs
         if o is not out:
