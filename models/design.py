@@ -114,8 +114,12 @@ class DesignModel:
                     "states": [s.name for s in m.states],
                     "outputs": [o.name for o in m.outputs],
                 }
-                text = json.dumps(self._spec)  # floats as repr: read back bit for bit
-                write_atomic(path, lambda f: f.write(text.encode()))
+                try:
+                    text = json.dumps(self._spec)  # floats as repr: read back bit for bit
+                except (TypeError, ValueError):  # a start value JSON cannot hold: built every time
+                    text = None
+                if text is not None:
+                    write_atomic(path, lambda f: f.write(text.encode()))
         return self._spec
 
     @property

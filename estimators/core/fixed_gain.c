@@ -15,7 +15,7 @@
 /* The matrices of one filter, set once (fixed_gain.BlockFilter); order and lda as numpy's `@`
  * passes them for the array's layout. */
 struct railfmu_fixed_gain {
-    void *gemv; /* numpy's cblas_dgemv */
+    void (*gemv)(void); /* numpy's cblas_dgemv, called as the BLASINT variant below */
     const double *F;
     int fo;
     long fl;
