@@ -28,6 +28,9 @@ from typing import Callable, Mapping, Sequence
 import numpy as np
 import sympy as sp
 
+from railfmu.models.cache import cache_root, write_atomic
+from railfmu.models.design import check_parameters
+
 #: The communication step ``h`` (s) of the step that ended at the current time ``t`` (0 in
 #: initialisation mode), for output expressions that switch at given times; C: the runtime's
 #: ``m->stepSize``.
@@ -221,16 +224,7 @@ class Model:
 
     def check_parameters(self, params: Mapping[str, float]) -> None:
         """The same range checks the FMU applies when initialisation ends."""
-        for p in self.parameters:
-            if p.type not in ("Real", "Integer"):
-                continue
-            v = params.get(p.name, p.start)
-            if p.min is not None and not v >= p.min:
-                raise ValueError(f"{self.identifier}: parameter {p.name} = {v} is below its minimum {p.min}")
-            if p.positive and not v > 0:
-                raise ValueError(f"{self.identifier}: parameter {p.name} = {v} must be > 0")
-            if p.max is not None and not v <= p.max:
-                raise ValueError(f"{self.identifier}: parameter {p.name} = {v} is above its maximum {p.max}")
+        check_parameters(self.identifier, self.parameters, params)
 
     # -- numerics (generated models) -------------------------------------------------------
     def _substitute_held_inputs(self, expr: sp.Expr, tau: sp.Symbol) -> sp.Expr:
@@ -323,26 +317,15 @@ class Model:
         wheelset). Keyed by the equations' text and the values, so a changed model or
         parameter is a new entry; the arrays are saved as float64, bit for bit."""
         import hashlib
-        import os
-        import tempfile
 
         text = repr((self.identifier, [str(e) for e in self.derivative_exprs()], [str(o.expr) for o in self.outputs],
                      [s.name for s in self.states], [v.name for v in self.inputs], key))
-        # the cache root of railfmu.fmus.cache (models import nothing of fmus)
-        root = os.environ.get("RAILFMU_CACHE") or Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "railfmu"
-        path = Path(root).expanduser() / "linearized" / f"{hashlib.sha256(text.encode()).hexdigest()[:32]}.npz"
+        path = cache_root() / "linearized" / f"{hashlib.sha256(text.encode()).hexdigest()[:32]}.npz"
         try:
             with np.load(path) as z:
                 return tuple(z[n] for n in "ABCD")
         except (OSError, KeyError, ValueError):
             pass
         mats = self._substituted(self._jacobians(), dict(key[0]), dict(key[1]))
-        try:  # atomically: a parallel run reads a whole file or none
-            path.parent.mkdir(parents=True, exist_ok=True)
-            fd, tmp = tempfile.mkstemp(dir=path.parent, suffix=".npz")
-            with os.fdopen(fd, "wb") as f:
-                np.savez(f, **dict(zip("ABCD", mats)))
-            os.replace(tmp, path)
-        except OSError:  # a read-only cache: derive every time
-            pass
+        write_atomic(path, lambda f: np.savez(f, **dict(zip("ABCD", mats))))  # a read-only cache: derived every time
         return mats

@@ -4,7 +4,8 @@ Muñoz et al., §4 (eqs. 9-27), on the wheelset + suspended-frame design model (
 Design model
 ------------
 :data:`railfmu.models.vehicle.wheelset.WHEELSET` linearised about the centred wheelset
-(:meth:`railfmu.models.base.Model.linearize`), ``dx = A x + B [xi, xi_rate]``,
+(:meth:`railfmu.models.base.Model.linearize`; a run reads the numbers from the cache,
+:class:`railfmu.models.design.DesignModel`), ``dx = A x + B [xi, xi_rate]``,
 ``[ddy, ddpsi, ddy_f] = C x + D [xi, xi_rate]``, with ``x = [y, psi, y_f, dy, dpsi, dy_f]``.
 The alignment ``xi`` is appended to the state (the paper's eq. 9) as a random walk (eq. 12
 ``dxi/dt = 0`` plus process noise)::
@@ -129,13 +130,17 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from railfmu.models.track import irregularity as track
-from railfmu.models.vehicle.wheelset import WHEELSET
+from railfmu.models.design import DesignModel
+from railfmu.models.track import erri_b176 as track
 
 from railfmu.estimators.core import fixed_gain, kalman, smoothers
 from railfmu.estimators.core.discretize import van_loan
 from railfmu.estimators.core.observer import _TIME_RTOL, Observer, OfflineObserver
 from railfmu.estimators.core.settings import Settings, setting
+
+#: the design model's numbers (parameters, linearisation) from the cache: building
+#: :data:`railfmu.models.vehicle.wheelset.WHEELSET` (sympy) only when they are not there
+WHEELSET = DesignModel("railfmu.models.vehicle.wheelset", "WHEELSET")
 
 STATES = ("y", "psi", "y_f", "dy", "dpsi", "dy_f", "xi")
 _STATE_UNITS = ("m", "rad", "m", "m/s", "rad/s", "m/s", "m")
@@ -211,8 +216,8 @@ class AlignmentKalmanFilter(Observer):
         self.steady_state = c.steady_state
 
         A, B, C, D = WHEELSET.linearize(self.params)
-        i_xi = [u.name for u in WHEELSET.inputs].index("xi")
-        rows = [o.name for o in WHEELSET.outputs]
+        i_xi = WHEELSET.inputs.index("xi")
+        rows = WHEELSET.outputs
         F_c = np.zeros((7, 7))
         F_c[:6, :6] = A
         F_c[:6, 6] = B[:, i_xi]

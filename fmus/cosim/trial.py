@@ -28,7 +28,7 @@ TRIAL_TIMEOUT_S = 120.0
 
 
 def built_by_railfmu(md) -> bool:
-    from railfmu.fmus.generate.codegen import GENERATOR
+    from railfmu.fmus.generate import GENERATOR
 
     return (md.generationTool or "").split(" ")[0] == GENERATOR
 

@@ -446,9 +446,9 @@ def built_by_railfmu(path: Path | str) -> bool:
     try:
         from fmpy import read_model_description
 
-        from railfmu.fmus.generate import codegen
+        from railfmu.fmus.generate import GENERATOR
 
-        return (read_model_description(str(path), validate=False).generationTool or "").split(" ")[0] == codegen.GENERATOR
+        return (read_model_description(str(path), validate=False).generationTool or "").split(" ")[0] == GENERATOR
     except Exception:  # noqa: BLE001 - unreadable: FMPy's validation says why
         return False
 

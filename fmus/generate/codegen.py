@@ -21,9 +21,9 @@ import sympy as sp
 
 from railfmu.models.base import STEP_SIZE, Model, Output, Parameter, Variable
 
+from railfmu.fmus.generate import GENERATOR
 from railfmu.fmus.units import UNITS, check_unit
 
-GENERATOR = "railfmu"
 TAU = sp.Symbol("tau", real=True)  # time since the inputs were set (first-order hold)
 LOG_CATEGORIES = {
     "logStatusError": "Errors: bad parameters, illegal call sequences, non-finite values",

@@ -205,17 +205,10 @@ from typing import Mapping
 import numpy as np
 
 from railfmu.models.base import STEP_TOLERANCE, Input, Model, Output, Parameter
+from railfmu.models.track.erri_b176 import ERRI_B176_LEVELS, OMEGA_C, OMEGA_R, OMEGA_S
 
 # ---- ERRI B176 spectra ---------------------------------------------------------------------
 
-OMEGA_C = 0.8246  # rad/m
-OMEGA_R = 0.0206  # rad/m
-OMEGA_S = 0.438  # rad/m
-#: psd_level -> (A_a, A_v) in m rad (ERRI B176 / ORE B176 RP1)
-ERRI_B176_LEVELS: dict[int, tuple[float, float]] = {
-    1: (2.119e-7, 4.032e-7),  # low level
-    2: (6.125e-7, 1.080e-6),  # high level
-}
 CHANNELS = ("alignment", "vertical_profile", "crosslevel")  # crosslevel: the angle theta
 MAX_GRID_POINTS = 1 << 22  # the FMU's tabulation limit (memory: 48 bytes per point)
 

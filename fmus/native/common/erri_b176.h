@@ -1,4 +1,4 @@
-/* ERRI B176 (ORE B176 RP1) track irregularity spectra, the constants of models/track/irregularity.py:
+/* ERRI B176 (ORE B176 RP1) track irregularity spectra, the constants of models/track/erri_b176.py:
  * S(Omega) = A Oc^2 / ((O^2 + Or^2)(O^2 + Oc^2)), Omega in rad/m, A in m rad. Each model
  * keeps its own formula: the operation order follows its Python twin, bit for bit. */
 #ifndef RAILFMU_ERRI_B176_H
