@@ -38,7 +38,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from railfmu.fmus.cache import cache_root
-from railfmu.fmus.cosim.masters import (
+from railfmu.fmus.cosim.coupling import (
     BLOCK_ROWS,
     RunResult,
     _Fmu,
@@ -46,7 +46,6 @@ from railfmu.fmus.cosim.masters import (
     _non_finite,
     _Progress,
     _row_buffer,
-    _run_python,
     _Terminated,
     fmu_stop_time,
 )
@@ -146,15 +145,12 @@ def _runs(system: System, record: list[str], fmus: dict[str, _Fmu]) -> list[tupl
     return runs
 
 
-def run_native(system: System, sinks: Sequence[Sink], progress: bool) -> RunResult:
-    """The container master on ``system`` (:func:`takes` it): see the module docstring."""
+def run_native(system: System, sinks: Sequence[Sink], progress: bool) -> RunResult | None:
+    """The container master on ``system`` (:func:`takes` it): see the module docstring. None
+    when the loop cannot be compiled (no C compiler)."""
     loop = load_loop()
-    if loop is None:
-        result = _run_python(system, "jacobi", sinks, progress)
-        result.master = "container"
-        result.notes.insert(0, "no C compiler: the container master ran the Jacobi master's Python loop "
-                               "(the same samples, slower)")
-        return result
+    if loop is None:  # the caller runs the Jacobi master's Python loop instead
+        return None
     n = check_system(system)
     start, stop, h = system.start_time, system.stop_time, system.step_size
     wall0 = time.perf_counter()
