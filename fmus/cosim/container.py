@@ -55,7 +55,6 @@ import json
 import os
 import platform
 import shutil
-import subprocess
 import sys
 import tempfile
 import uuid
@@ -80,7 +79,7 @@ from fmpy.model_description import (
 )
 
 from railfmu.models.errors import UserError
-from railfmu.fmus.cache import cache_root
+from railfmu.fmus.cache import cache_root, compiled_library
 from railfmu.fmus.cosim.slave import Slave
 from railfmu.fmus.cosim.system import System, check_system, recorded_signals
 
@@ -379,22 +378,8 @@ def load_driver():
     global _driver
     if _driver is not None:
         return _driver or None
-    cc = os.environ.get("CC", "gcc")
-    cmd = [cc, "-std=c99", "-O2", "-Wall", "-Wextra", "-Werror", "-shared", "-fPIC"]
-    src = DRIVER_SOURCE.read_bytes()
-    key = hashlib.sha256(src + " ".join(cmd).encode()).hexdigest()[:16]
-    lib = cache_root() / f"container_driver-{key}.so"
-    try:
-        if not lib.is_file():
-            lib.parent.mkdir(parents=True, exist_ok=True)
-            tmp = lib.with_suffix(f".{os.getpid()}.tmp")
-            res = subprocess.run([*cmd, str(DRIVER_SOURCE), "-o", str(tmp), "-lm"],
-                                 check=False, capture_output=True, text=True)
-            if res.returncode != 0:
-                raise OSError(res.stderr.strip())
-            os.replace(tmp, lib)  # atomic: concurrent runs never load half a file
-        dll = ctypes.CDLL(str(lib))
-    except OSError:
+    dll = compiled_library(DRIVER_SOURCE, ["-std=c99", "-O2", "-Wall", "-Wextra", "-Werror"])
+    if dll is None:
         _driver = False
         return None
     fn = dll.railfmu_run_steps

@@ -30,14 +30,11 @@ from __future__ import annotations
 
 import contextlib
 import ctypes
-import hashlib
-import os
-import subprocess
 import time
 from collections.abc import Sequence
 from pathlib import Path
 
-from railfmu.fmus.cache import cache_root
+from railfmu.fmus.cache import compiled_library
 from railfmu.fmus.cosim.coupling import (
     BLOCK_ROWS,
     RunResult,
@@ -101,21 +98,8 @@ def load_loop():
         return _loop or None
     # -ffp-contract=off: factor * src + offset rounded twice, as Python computes it (an fma
     # would round once and differ from the Jacobi master in the last bit)
-    cmd = [os.environ.get("CC", "gcc"), "-std=c99", "-O2", "-ffp-contract=off", "-Wall", "-Wextra",
-           "-Werror", "-shared", "-fPIC"]
-    key = hashlib.sha256(LOOP_SOURCE.read_bytes() + " ".join(cmd).encode()).hexdigest()[:16]
-    lib = cache_root() / f"coupling_loop-{key}.so"
-    try:
-        if not lib.is_file():
-            lib.parent.mkdir(parents=True, exist_ok=True)
-            tmp = lib.with_suffix(f".{os.getpid()}.tmp")
-            res = subprocess.run([*cmd, str(LOOP_SOURCE), "-o", str(tmp), "-lm"],
-                                 check=False, capture_output=True, text=True)
-            if res.returncode != 0:
-                raise OSError(res.stderr.strip())
-            os.replace(tmp, lib)  # atomic: concurrent runs never load half a file
-        dll = ctypes.CDLL(str(lib))
-    except OSError:
+    dll = compiled_library(LOOP_SOURCE, ["-std=c99", "-O2", "-ffp-contract=off", "-Wall", "-Wextra", "-Werror"])
+    if dll is None:
         _loop = False
         return None
     fn = dll.railfmu_coupled_rows
