@@ -13,6 +13,7 @@ member does not load matplotlib.
 
 from __future__ import annotations
 
+import io
 import json
 import math
 from pathlib import Path
@@ -116,13 +117,22 @@ def _overlaps(a, b) -> bool:
     return a.x0 < b.x1 and b.x0 < a.x1 and a.y0 < b.y1 and b.y0 < a.y1
 
 
-def save(fig, path: Path) -> None:
+def save(fig, path) -> None:
     """Write ``fig`` as a PNG whose text chunk :data:`LABELS_KEY` holds, per axis, its title, x
     and y labels, legend entries and whether the legend covers the axis (see
     :func:`figure_labels`). The extents come from the canvas's renderer without a draw: the
     figure is drawn once, by ``savefig``."""
     fig.set_dpi(DPI)  # the renderer at the PNG's resolution, as savefig's own
     renderer = fig.canvas.get_renderer()
+    # savefig's "tight" box from the same renderer, without the extra draw "tight" makes to find it
+    box = fig.get_tightbbox(renderer).padded(0.1)  # savefig.pad_inches
+    # zlib level 3: a third less time to encode than PIL's default 6, the same pixels in a file 10-20 % larger
+    fig.savefig(path, dpi=DPI, bbox_inches=box, metadata={LABELS_KEY: json.dumps(_labels(fig, renderer))},
+                pil_kwargs={"compress_level": 3})
+
+
+def _labels(fig, renderer) -> list[dict]:
+    """Per axis: title, x and y labels, legend entries, whether the legend covers the axis."""
     axes = []
     for ax in fig.axes:
         leg = ax.get_legend()
@@ -130,11 +140,7 @@ def save(fig, path: Path) -> None:
                      "legend": [t.get_text() for t in leg.get_texts()] if leg else [],
                      "legend_over_data": bool(leg and _overlaps(leg.get_window_extent(renderer),
                                                                 ax.get_window_extent(renderer)))})
-    # savefig's "tight" box from the same renderer, without the extra draw "tight" makes to find it
-    box = fig.get_tightbbox(renderer).padded(0.1)  # savefig.pad_inches
-    # zlib level 3: a third less time to encode than PIL's default 6, the same pixels in a file 10-20 % larger
-    fig.savefig(path, dpi=DPI, bbox_inches=box, metadata={LABELS_KEY: json.dumps(axes)},
-                pil_kwargs={"compress_level": 3})
+    return axes
 
 
 #: columns of a figure's curve envelope (:func:`envelope`): above the ~1100 pixel columns of the
@@ -185,36 +191,88 @@ def figure(out: Path, fname: str, title: str, x: np.ndarray, x_label: str, axes:
     """One PNG, one axis per list of curves sharing x; returns the file name. Every y-axis says
     ``quantity [unit]``: ``quantities[i]`` for axis i, else its one curve's label, else the
     words its curves' labels share (else all of them); an axis of several curves gets a legend
-    outside the data."""
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
-    from matplotlib.layout_engine import TightLayoutEngine
+    outside the data.
 
-    # a bare Agg figure: no pyplot (its import and figure manager) for a PNG
-    fig = Figure(figsize=(width, max(3.6, height * len(axes))))
-    FigureCanvasAgg(fig)
-    ax_grid = fig.subplots(len(axes), 1, sharex=True, squeeze=False)
-    for i, (ax, curves) in enumerate(zip(ax_grid[:, 0], axes)):
+    Inside a :func:`figure_worker.batch <railfmu.experiments.engine.figure_worker.batch>`
+    (``Run.save``) the figure worker draws it and the file exists when the batch ends; else
+    it is drawn here and exists on return."""
+    from railfmu.experiments.engine.figure_worker import current
+
+    spec = figure_spec(title, x, x_label, axes, height, width, legend_columns, quantities)
+    batch = current()
+    if batch is not None:
+        batch.submit(spec, out / fname)
+    else:
+        write_png(out / fname, render(spec))
+    return fname
+
+
+def figure_spec(title: str, x: np.ndarray, x_label: str, axes: list[list[Curve]], height: float = 2.4,
+                width: float = 9.0, legend_columns: int = 1, quantities: list[str | None] | None = None) -> dict:
+    """What :func:`render` draws, without matplotlib: the labels and each curve's display
+    envelope (a few thousand points however long the run: small to send to the worker)."""
+    spec_axes = []
+    for i, curves in enumerate(axes):
+        drawn = []
         for label, values, _, *style in curves:
             n = min(len(x), len(values))  # estimates may stop short of the signals
             xs, ys = envelope(np.asarray(x)[:n], np.asarray(values)[:n])
-            ax.plot(xs, ys, label=label, **({"lw": 0.8} | (style[0] if style else {})))
+            drawn.append((label, xs, ys, {"lw": 0.8} | (style[0] if style else {})))
         labels = [c[0] for c in curves]
         quantity = (quantities[i] if quantities and quantities[i] else None) or (
             labels[0] if len(labels) == 1 else _common_words(labels) or " / ".join(labels))
         # a sensor channel may be unitless ("-") where the physical signal beside it is not
         unit = next((c[2] for c in curves if c[2] not in NO_UNIT), curves[0][2])
-        ax.set_ylabel(f"{quantity} {unit_text(unit)}", fontsize=8)
-        if len(curves) > 1:
-            legend_outside(ax, legend_columns)
+        spec_axes.append({"y_label": f"{quantity} {unit_text(unit)}", "legend": len(curves) > 1, "curves": drawn})
+    return {"title": title, "x_label": x_label, "size": (width, max(3.6, height * len(axes))),
+            "legend_columns": legend_columns, "axes": spec_axes}
+
+
+def render(spec: dict) -> bytes:
+    """The PNG of a :func:`figure_spec`."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+    from matplotlib.layout_engine import TightLayoutEngine
+
+    from railfmu.experiments.engine.figure_layout import arrange, draw
+
+    # a bare Agg figure: no pyplot (its import and figure manager) for a PNG
+    fig = Figure(figsize=spec["size"], dpi=DPI)
+    FigureCanvasAgg(fig)
+    ax_grid = fig.subplots(len(spec["axes"]), 1, sharex=True, squeeze=False)
+    for ax, a in zip(ax_grid[:, 0], spec["axes"]):
+        for label, xs, ys, style in a["curves"]:
+            ax.plot(xs, ys, label=label, **style)
+        ax.set_ylabel(a["y_label"], fontsize=8)
+        if a["legend"]:
+            legend_outside(ax, spec["legend_columns"])
         ax.grid(alpha=0.3)
-    ax_grid[0, 0].set_title(title)
-    ax_grid[-1, 0].set_xlabel(x_label)
-    # fig.tight_layout()'s layout, run once without leaving a layout engine on the figure (with one,
-    # savefig draws the figure twice)
-    TightLayoutEngine().execute(fig)
-    save(fig, out / fname)
-    return fname
+    ax_grid[0, 0].set_title(spec["title"])
+    ax_grid[-1, 0].set_xlabel(spec["x_label"])
+    renderer = fig.canvas.get_renderer()
+    arrange(fig, renderer, DPI)  # margins from the texts around the axes: no tick-by-tick layout
+    png = draw(fig, DPI, {LABELS_KEY: json.dumps(_labels(fig, renderer))})
+    if png is None:  # something reached the canvas's edge: laid out by matplotlib, as before
+        # fig.tight_layout()'s layout, run once without leaving a layout engine on the figure (with one,
+        # savefig draws the figure twice)
+        TightLayoutEngine().execute(fig)
+        buf = io.BytesIO()
+        save(fig, buf)
+        png = buf.getvalue()
+    return png
+
+
+def write_png(path: Path, png: bytes) -> None:
+    """The PNG written and renamed into place: a reader never sees half of one."""
+    from railfmu.experiments.engine.files import write_atomic
+
+    write_atomic(path, png, sync=False)
+
+
+def warm_up() -> None:
+    """Import matplotlib and load its fonts: what the first figure of a process pays."""
+    t = np.linspace(0.0, 1.0, 50)
+    render(figure_spec("warm-up", t, "time [s]", [[("a", t, "m"), ("b", -t, "m")]]))
 
 
 def plot_signals(spec: dict | None, signals: dict[str, np.ndarray], roles: dict, units: dict[str, str], out: Path,

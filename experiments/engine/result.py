@@ -167,11 +167,14 @@ class Run:
         position = roles.get(exp.study.x_axis) if exp.study.x_axis != "time" else None
         if position is not None and position not in rd.signals:  # a speed setting: distance = V t
             position = float(position)
+        from railfmu.experiments.engine.figure_worker import batch
+
         units, columns = units_of(system), columns_of(system)
-        self._plots = (plot_signals(exp.study.figures_of_signals, rd.signals, roles, units, out, position, columns)
-                       + plot_estimates(bank, rd.signals, units, out, position, columns, exp.study.quantities)
-                       + exp.study.figures(RunData(rd.signals, rd.estimates, base, roles, rd.observers), out))
-        write_atomic(out / "report.md", self.report())
+        with batch():  # the figure worker draws them while the report is written; all written at the end
+            self._plots = (plot_signals(exp.study.figures_of_signals, rd.signals, roles, units, out, position, columns)
+                           + plot_estimates(bank, rd.signals, units, out, position, columns, exp.study.quantities)
+                           + exp.study.figures(RunData(rd.signals, rd.estimates, base, roles, rd.observers), out))
+            write_atomic(out / "report.md", self.report())
         offline = [f"estimates_{name}.{fmt}" for name in bank.results]
         written = [f"signals.{fmt}", f"estimates.{fmt}", *offline, *files, "metrics.json", "report.md", *self._plots]
         if log is not None:
