@@ -105,7 +105,7 @@ def run(experiment: ExperimentRef, variant: str | None = None, *, parameters: Ma
         start()
     r = execute(experiment, variant, out, master, _sets(parameters), seed, stop_time, step_size,
                 progress=progress, log=log, verbose=verbose, fmi_version=fmi_version,
-                record_format=record_format)
+                record_format=record_format, figures=out is not None)
     if out is not None:
         r.save(out, log=log)
     return r

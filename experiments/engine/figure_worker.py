@@ -26,15 +26,17 @@ process closes its pipe (or dies).
 from __future__ import annotations
 
 import atexit
+import builtins
 import contextlib
 import json
 import os
 import pickle
+import select
+import struct
 import subprocess
 import sys
 import threading
-import time
-from multiprocessing.connection import Connection
+import warnings
 from pathlib import Path
 
 #: seconds without a reply from a busy worker before its pending figures are drawn in-process
@@ -48,7 +50,8 @@ _local = threading.local()  # this thread's open batch
 
 
 class _Worker:
-    """The parent's end: the process, the pipes, the replies received by job number."""
+    """The parent's end: the process, the pipes (non-blocking: every send and wait has a
+    deadline), the replies received by job number."""
 
     def __init__(self):
         req_r, req_w = os.pipe()
@@ -67,57 +70,102 @@ class _Worker:
             os.close(req_r)
             os.close(rep_w)
         self.pid = os.getpid()  # a forked child of this process must not talk to its parent's worker
-        self.requests = Connection(req_w, readable=False)
-        self.replies = Connection(rep_r, writable=False)
+        self.requests, self.replies = req_w, rep_r
+        os.set_blocking(req_w, False)
+        os.set_blocking(rep_r, False)
+        self.received = bytearray()  # reply bytes not yet a whole frame
         self.results: dict[int, tuple[bool, object]] = {}
+        self.dropped: set[int] = set()  # jobs no batch waits for any more: their replies are not kept
         self.next_job = 0
         self.dead = False
 
-    def send(self, spec) -> int | None:
-        """The job's number; None when the worker is gone."""
+    def send(self, spec, timeout: float) -> int | None:
+        """The job's number; None when the worker is gone (or took no bytes for ``timeout`` s:
+        then it is stopped)."""
         with _lock:
             if self.dead:
                 return None
             job, self.next_job = self.next_job, self.next_job + 1
+            data = memoryview(_frame(pickle.dumps((job, spec), protocol=pickle.HIGHEST_PROTOCOL)))
             try:
-                self.requests.send_bytes(pickle.dumps((job, spec), protocol=pickle.HIGHEST_PROTOCOL))
-            except OSError:  # the worker has died: its pipe is closed
+                while data:
+                    if not _ready(self.requests, select.POLLOUT, timeout):
+                        raise TimeoutError
+                    data = data[os.write(self.requests, data):]
+            except (OSError, TimeoutError):  # died (its pipe is closed) or hung
                 self._stop()
                 return None
             return job
 
     def wait(self, jobs: list[int], timeout: float) -> dict[int, tuple[bool, object]]:
-        """The replies to ``jobs`` that arrive before the worker dies or stays silent for
+        """The replies to ``jobs`` that arrive before the worker dies or sends nothing for
         ``timeout`` s (then it is stopped)."""
         with _lock:
-            last = time.monotonic()
             while not self.dead and any(j not in self.results for j in jobs):
-                left = timeout - (time.monotonic() - last)
                 try:
-                    if left <= 0 or not self.replies.poll(left):
-                        self._stop()  # silent too long: hung
-                        break
-                    job, ok, payload = pickle.loads(self.replies.recv_bytes())
-                except (EOFError, OSError, pickle.UnpicklingError):  # died, or died half-way through a reply
+                    if not _ready(self.replies, select.POLLIN, timeout):
+                        raise TimeoutError
+                    chunk = os.read(self.replies, 1 << 20)
+                    if not chunk:
+                        raise EOFError
+                    self.received += chunk
+                    while len(self.received) >= HEADER.size:
+                        n = HEADER.unpack_from(self.received)[0]
+                        if len(self.received) < HEADER.size + n:
+                            break
+                        job, ok, payload = pickle.loads(self.received[HEADER.size:HEADER.size + n])
+                        del self.received[:HEADER.size + n]
+                        if job in self.dropped:
+                            self.dropped.discard(job)
+                        else:
+                            self.results[job] = (ok, payload)
+                except (OSError, EOFError, TimeoutError, pickle.UnpicklingError):  # died (maybe half-way), hung
                     self._stop()
-                    break
-                self.results[job] = (ok, payload)
-                last = time.monotonic()
             return {j: self.results.pop(j) for j in jobs if j in self.results}
 
     def drop(self, jobs: list[int]) -> None:
         """Forget jobs a failed batch no longer waits for (their replies are dropped when they come)."""
         with _lock:
+            self.dropped.update(jobs)
             for j in jobs:
                 self.results.pop(j, None)
 
     def _stop(self) -> None:
         self.dead = True
-        for conn in (self.requests, self.replies):
-            conn.close()
+        for fd in (self.requests, self.replies):
+            os.close(fd)
         if self.proc.poll() is None:
             self.proc.kill()
         self.proc.wait()
+
+
+def _ready(fd: int, event: int, timeout: float) -> bool:
+    """Whether ``fd`` becomes ready (or its other end closes) within ``timeout`` s."""
+    p = select.poll()  # not select.select: no limit on the descriptor's number
+    p.register(fd, event)
+    return bool(p.poll(timeout * 1000))
+
+
+HEADER = struct.Struct("!Q")  # a frame: its length, then the pickle
+
+
+def _frame(data: bytes) -> bytes:
+    return HEADER.pack(len(data)) + data
+
+
+def _read_frame(fd: int) -> bytes | None:
+    """The next frame from a blocking pipe; None at its end."""
+    def exactly(n: int) -> bytes | None:
+        buf = bytearray()
+        while len(buf) < n:
+            chunk = os.read(fd, n - len(buf))
+            if not chunk:
+                return None
+            buf += chunk
+        return bytes(buf)
+
+    head = exactly(HEADER.size)
+    return None if head is None else exactly(HEADER.unpack(head)[0])
 
 
 def enabled() -> bool:
@@ -129,7 +177,7 @@ def start() -> bool:
     none can start (the figures are then drawn in-process)."""
     global _worker
     with _lock:
-        if _worker is not None and not _worker.dead and _worker.pid == os.getpid():
+        if _alive():
             return True
         if not enabled() or os.environ.get("_RAILFMU_IN_FIGURE_WORKER"):
             return False
@@ -146,7 +194,7 @@ def stop() -> None:
     """End the worker (at exit; every batch has written its files by then)."""
     global _worker
     with _lock:
-        if _worker is not None and not _worker.dead and _worker.pid == os.getpid():
+        if _alive():
             _worker._stop()
         _worker = None
 
@@ -154,34 +202,44 @@ def stop() -> None:
 class Batch:
     """The figures of one ``Run.save``: each drawn by the worker, written at :meth:`finish`."""
 
-    def __init__(self, worker: _Worker | None):
+    def __init__(self, worker: _Worker | None, ahead: bool = False):
         self.worker = worker
-        self.pending: list[tuple[int, object, Path]] = []  # (job, spec, path)
+        self.ahead = ahead  # figures for a later batch (:meth:`take`): nothing written here
+        self.pending: list[tuple[int | None, object, Path]] = []  # (job, or None: draw here; spec; path)
 
     def submit(self, spec, path: Path) -> None:
         from railfmu.experiments.engine.plots import render, write_png
 
-        job = self.worker.send(spec) if self.worker is not None else None
-        if job is None:  # no worker: drawn here, now, as without one
+        job = self.worker.send(spec, TIMEOUT_S) if self.worker is not None else None
+        if job is None and not self.ahead:  # no worker: drawn here, now, as without one
             write_png(path, render(spec))
         else:
             self.pending.append((job, spec, path))
+
+    def take(self, ahead: Batch, folder: Path) -> None:
+        """The figures ``ahead`` handed to the worker, written into ``folder`` with this batch's."""
+        for job, spec, path in ahead.pending:
+            self.pending.append((job if ahead.worker is self.worker else None, spec, folder / path.name))
+        ahead.pending = []
 
     def finish(self) -> None:
         """Wait for the worker's PNGs and write them; draw here whatever it did not draw."""
         from railfmu.experiments.engine.plots import render, write_png
 
-        if not self.pending:
-            return
-        replies = self.worker.wait([job for job, _, _ in self.pending], TIMEOUT_S)
+        jobs = [job for job, _, _ in self.pending if job is not None]
+        replies = self.worker.wait(jobs, TIMEOUT_S) if jobs else {}
         for job, spec, path in self.pending:
-            ok, png = replies.get(job, (False, None))
-            write_png(path, png if ok else render(spec))  # a figure the worker could not draw: drawn here
+            ok, reply = replies.get(job, (False, None))
+            if ok:
+                png, said = reply
+                for category, message in said:  # what matplotlib warned about in the worker
+                    warnings.warn(message, getattr(builtins, category, UserWarning), stacklevel=2)
+            write_png(path, png if ok else render(spec))  # one the worker did not draw: drawn here
         self.pending = []
 
     def abandon(self) -> None:
-        if self.pending and self.worker is not None:
-            self.worker.drop([job for job, _, _ in self.pending])
+        if self.worker is not None:
+            self.worker.drop([job for job, _, _ in self.pending if job is not None])
         self.pending = []
 
 
@@ -205,6 +263,35 @@ def batch():
         _local.batch = None
 
 
+@contextlib.contextmanager
+def ahead():
+    """Inside: :func:`plots.figure` hands its figures to a running worker for a later
+    :func:`batch` to write (:meth:`Batch.take`: the figures it draws do not depend on the
+    folder). Yields None, and nothing is drawn, when no worker runs."""
+    if not running() or getattr(_local, "batch", None) is not None:
+        yield None
+        return
+    b = Batch(_worker, ahead=True)
+    _local.batch = b
+    try:
+        yield b
+    except BaseException:
+        b.abandon()
+        raise
+    finally:
+        _local.batch = None
+
+
+def running() -> bool:
+    """Whether this process's worker is up (:func:`start`)."""
+    with _lock:
+        return _alive()
+
+
+def _alive() -> bool:
+    return _worker is not None and not _worker.dead and _worker.pid == os.getpid()
+
+
 def current() -> Batch | None:
     """The batch open in this thread, if any."""
     return getattr(_local, "batch", None)
@@ -217,21 +304,23 @@ def serve(requests_fd: int, replies_fd: int) -> None:
     import queue
 
     os.environ["_RAILFMU_IN_FIGURE_WORKER"] = "1"
-    requests, replies = Connection(requests_fd, writable=False), Connection(replies_fd, readable=False)
     inbox: queue.SimpleQueue = queue.SimpleQueue()
     outbox: queue.SimpleQueue = queue.SimpleQueue()
 
     def read():
         try:
-            while True:
-                inbox.put(requests.recv_bytes())
-        except (EOFError, OSError):  # the parent closed its end, or died
-            inbox.put(None)
+            while (msg := _read_frame(requests_fd)) is not None:
+                inbox.put(msg)
+        except OSError:
+            pass
+        inbox.put(None)  # the parent closed its end, or died
 
     def write():
         try:
             while (reply := outbox.get()) is not None:
-                replies.send_bytes(reply)
+                data = memoryview(_frame(reply))
+                while data:
+                    data = data[os.write(replies_fd, data):]
         except OSError:  # the parent is gone
             os._exit(0)
 
@@ -244,7 +333,9 @@ def serve(requests_fd: int, replies_fd: int) -> None:
     while (msg := inbox.get()) is not None:
         job, spec = pickle.loads(msg)
         try:
-            reply = (job, True, render(spec))
+            with warnings.catch_warnings(record=True) as said:
+                png = render(spec)
+            reply = (job, True, (png, [(w.category.__name__, str(w.message)) for w in said]))
         except Exception as exc:  # noqa: BLE001 - the parent draws it again, and raises it there
             reply = (job, False, f"{type(exc).__name__}: {exc}")
         outbox.put(pickle.dumps(reply, protocol=pickle.HIGHEST_PROTOCOL))
