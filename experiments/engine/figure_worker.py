@@ -32,6 +32,7 @@ import json
 import os
 import pickle
 import select
+import signal
 import struct
 import subprocess
 import sys
@@ -304,6 +305,9 @@ def serve(requests_fd: int, replies_fd: int) -> None:
     import queue
 
     os.environ["_RAILFMU_IN_FIGURE_WORKER"] = "1"
+    # Ctrl-C in a terminal reaches the whole process group: the parent decides what ends (it
+    # closes the pipe, or kills this process, at its exit)
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     inbox: queue.SimpleQueue = queue.SimpleQueue()
     outbox: queue.SimpleQueue = queue.SimpleQueue()
 

@@ -144,6 +144,8 @@ class Run:
         list of str
             The file names written: signals.csv, estimates.csv, estimates_NAME.csv of each
             offline observer, the study's data files, metrics.json, report.md, PNG figures.
+            Every one exists on return (the figures are drawn by the process's figure worker,
+            :mod:`railfmu.experiments.engine.figure_worker`, started here if need be).
         """
         from railfmu.experiments.engine.files import ensure_folder, write_atomic
 
