@@ -74,7 +74,7 @@ class Run:
         self._streamed = streamed  # the folder signals.csv and estimates.csv were written to while running
         self.record_format = record_format  # the format they were streamed in
         self._plots: list[str] = []
-        self._ahead = ahead  # the engine's figures, handed to the figure worker as the run ended
+        self._ahead = ahead  # (batch, file names): the engine's figures, in the worker since the stepping ended
 
     def __repr__(self) -> str:
         n = len(self.signals.get("time", ()))
