@@ -209,7 +209,7 @@ class Batch:
         self.pending: list[tuple[int | None, object, Path]] = []  # (job, or None: draw here; spec; path)
 
     def submit(self, spec, path: Path) -> None:
-        from railfmu.experiments.engine.plots import render, write_png
+        from railfmu.experiments.engine.figure_png import render, write_png
 
         job = self.worker.send(spec, TIMEOUT_S) if self.worker is not None else None
         if job is None and not self.ahead:  # no worker: drawn here, now, as without one
@@ -225,7 +225,7 @@ class Batch:
 
     def finish(self) -> None:
         """Wait for the worker's PNGs and write them; draw here whatever it did not draw."""
-        from railfmu.experiments.engine.plots import render, write_png
+        from railfmu.experiments.engine.figure_png import render, write_png
 
         jobs = [job for job, _, _ in self.pending if job is not None]
         replies = self.worker.wait(jobs, TIMEOUT_S) if jobs else {}
@@ -331,7 +331,7 @@ def serve(requests_fd: int, replies_fd: int) -> None:
     threading.Thread(target=read, daemon=True).start()
     writer = threading.Thread(target=write, daemon=True)
     writer.start()
-    from railfmu.experiments.engine.plots import render, warm_up
+    from railfmu.experiments.engine.figure_png import render, warm_up
 
     warm_up()  # matplotlib's import and fonts, while the parent sets up and steps
     while (msg := inbox.get()) is not None:

@@ -13,23 +13,27 @@ member does not load matplotlib.
 
 from __future__ import annotations
 
-import io
 import json
 import math
 from pathlib import Path
 
 import numpy as np
 
+from railfmu.experiments.engine.figure_png import (  # noqa: F401  (the figure boilerplate, here for the studies)
+    DPI,
+    LABELS_KEY,
+    legend_outside,
+    render,
+    save,
+    write_png,
+)
+
 # one curve: (label, values, unit) or (label, values, unit, matplotlib line style kwargs)
 Curve = tuple
-#: PNG text key holding the figure's axis labels (JSON)
-LABELS_KEY = "railfmu:axes"
 #: display units a label may ask for with ``[unit]``: (unit of the values, display unit) -> factor
 DISPLAY = {("m", "mm"): 1e3, ("m/s", "mm/s"): 1e3, ("m/s", "km/h"): 3.6, ("rad", "deg"): 180 / math.pi,
            ("rad/s", "deg/s"): 180 / math.pi, ("N/m", "kN/m"): 1e-3}
 NO_UNIT = ("-", "?", "", None)
-#: PNG resolution
-DPI = 110
 
 
 def _pyplot():
@@ -113,36 +117,6 @@ def _common_words(labels: list[str]) -> str:
     return " ".join(common).rstrip(",:")
 
 
-def _overlaps(a, b) -> bool:
-    return a.x0 < b.x1 and b.x0 < a.x1 and a.y0 < b.y1 and b.y0 < a.y1
-
-
-def save(fig, path) -> None:
-    """Write ``fig`` as a PNG whose text chunk :data:`LABELS_KEY` holds, per axis, its title, x
-    and y labels, legend entries and whether the legend covers the axis (see
-    :func:`figure_labels`). The extents come from the canvas's renderer without a draw: the
-    figure is drawn once, by ``savefig``."""
-    fig.set_dpi(DPI)  # the renderer at the PNG's resolution, as savefig's own
-    renderer = fig.canvas.get_renderer()
-    # savefig's "tight" box from the same renderer, without the extra draw "tight" makes to find it
-    box = fig.get_tightbbox(renderer).padded(0.1)  # savefig.pad_inches
-    # zlib level 3: a third less time to encode than PIL's default 6, the same pixels in a file 10-20 % larger
-    fig.savefig(path, dpi=DPI, bbox_inches=box, metadata={LABELS_KEY: json.dumps(_labels(fig, renderer))},
-                pil_kwargs={"compress_level": 3})
-
-
-def _labels(fig, renderer) -> list[dict]:
-    """Per axis: title, x and y labels, legend entries, whether the legend covers the axis."""
-    axes = []
-    for ax in fig.axes:
-        leg = ax.get_legend()
-        axes.append({"title": ax.get_title(), "x": ax.get_xlabel(), "y": ax.get_ylabel(),
-                     "legend": [t.get_text() for t in leg.get_texts()] if leg else [],
-                     "legend_over_data": bool(leg and _overlaps(leg.get_window_extent(renderer),
-                                                                ax.get_window_extent(renderer)))})
-    return axes
-
-
 #: columns of a figure's curve envelope (:func:`envelope`): above the ~1100 pixel columns of the
 #: widest figure at 110 dpi, so the decimated curve draws the same pixels
 ENVELOPE_COLUMNS = 2000
@@ -178,11 +152,6 @@ def figure_labels(png: Path | str) -> list[dict]:
     with Image.open(png) as im:
         text = im.text.get(LABELS_KEY)
     return json.loads(text) if text else []
-
-
-def legend_outside(ax, columns: int = 1) -> None:
-    """The axis's legend to the right of it, off the data."""
-    ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0, ncol=columns)
 
 
 def figure(out: Path, fname: str, title: str, x: np.ndarray, x_label: str, axes: list[list[Curve]],
@@ -226,53 +195,6 @@ def figure_spec(title: str, x: np.ndarray, x_label: str, axes: list[list[Curve]]
         spec_axes.append({"y_label": f"{quantity} {unit_text(unit)}", "legend": len(curves) > 1, "curves": drawn})
     return {"title": title, "x_label": x_label, "size": (width, max(3.6, height * len(axes))),
             "legend_columns": legend_columns, "axes": spec_axes}
-
-
-def render(spec: dict) -> bytes:
-    """The PNG of a :func:`figure_spec`."""
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
-    from matplotlib.layout_engine import TightLayoutEngine
-
-    from railfmu.experiments.engine.figure_layout import arrange, draw
-
-    # a bare Agg figure: no pyplot (its import and figure manager) for a PNG
-    fig = Figure(figsize=spec["size"], dpi=DPI)
-    FigureCanvasAgg(fig)
-    ax_grid = fig.subplots(len(spec["axes"]), 1, sharex=True, squeeze=False)
-    for ax, a in zip(ax_grid[:, 0], spec["axes"]):
-        for label, xs, ys, style in a["curves"]:
-            ax.plot(xs, ys, label=label, **style)
-        ax.set_ylabel(a["y_label"], fontsize=8)
-        if a["legend"]:
-            legend_outside(ax, spec["legend_columns"])
-        ax.grid(alpha=0.3)
-    ax_grid[0, 0].set_title(spec["title"])
-    ax_grid[-1, 0].set_xlabel(spec["x_label"])
-    renderer = fig.canvas.get_renderer()
-    arrange(fig, renderer, DPI)  # margins from the texts around the axes: no tick-by-tick layout
-    png = draw(fig, DPI, {LABELS_KEY: json.dumps(_labels(fig, renderer))})
-    if png is None:  # something reached the canvas's edge: laid out by matplotlib, as before
-        # fig.tight_layout()'s layout, run once without leaving a layout engine on the figure (with one,
-        # savefig draws the figure twice)
-        TightLayoutEngine().execute(fig)
-        buf = io.BytesIO()
-        save(fig, buf)
-        png = buf.getvalue()
-    return png
-
-
-def write_png(path: Path, png: bytes) -> None:
-    """The PNG written and renamed into place: a reader never sees half of one."""
-    from railfmu.experiments.engine.files import write_atomic
-
-    write_atomic(path, png, sync=False)
-
-
-def warm_up() -> None:
-    """Import matplotlib and load its fonts: what the first figure of a process pays."""
-    t = np.linspace(0.0, 1.0, 50)
-    render(figure_spec("warm-up", t, "time [s]", [[("a", t, "m"), ("b", -t, "m")]]))
 
 
 def plot_signals(spec: dict | None, signals: dict[str, np.ndarray], roles: dict, units: dict[str, str], out: Path,
