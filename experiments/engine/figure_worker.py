@@ -18,9 +18,10 @@ it dies or sends nothing for :data:`TIMEOUT_S`, is drawn in this process as with
 The worker is a new interpreter (``subprocess``, this process's ``sys.path``), not a
 multiprocessing child: ``fork`` would copy a parent that may hold threads, and ``spawn`` and
 ``forkserver`` import the parent's ``__main__`` again in the child (a user's script without a
-main guard would run once more there). It reads and writes through two pipes, each drained
-by a thread of its own, so neither side blocks on the other's sends; it exits when this
-process closes its pipe (or dies).
+main guard would run once more there). It reads its pipe and writes the other each in a
+thread of its own, so the parent's sends never wait for a drawing and its replies never wait
+for the parent; every send and wait of the parent has a deadline. It exits when this process
+closes its pipe (or dies), and is killed at this process's exit.
 """
 
 from __future__ import annotations
@@ -170,6 +171,7 @@ def _read_frame(fd: int) -> bytes | None:
 
 
 def enabled() -> bool:
+    """Whether figures may go to a worker (:data:`ENV` is not "0")."""
     return os.environ.get(ENV, "1") != "0"
 
 
@@ -180,7 +182,8 @@ def start() -> bool:
     with _lock:
         if _alive():
             return True
-        if not enabled() or os.environ.get("_RAILFMU_IN_FIGURE_WORKER"):
+        if not enabled() or os.environ.get("_RAILFMU_IN_FIGURE_WORKER") or not hasattr(select, "poll") \
+                or os.name != "posix":  # pass_fds and poll: POSIX
             return False
         try:
             _worker = _Worker()

@@ -222,7 +222,12 @@ def execute(name: str | Path, variant: str | None = None, out: Path | str | None
     ahead = figures_ahead(exp, system, signals, roles, bank) if figures else None
     t_study = time.perf_counter()
     data = RunData(signals, estimates, metrics, roles, observers)
-    metrics.update(exp.study.metrics(data))
+    try:
+        metrics.update(exp.study.metrics(data))
+    except BaseException:  # no Run will take the figures handed ahead: the worker's replies are not kept
+        if ahead is not None:
+            ahead[0].abandon()
+        raise
     from railfmu.experiments.engine.replay import learned_nothing
 
     for w in learned_nothing(metrics["observers"]):  # said in the heading's warnings, not only deep in the JSON
