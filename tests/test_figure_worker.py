@@ -54,9 +54,7 @@ def test_a_worker_that_dies_loses_no_figure(worker, tmp_path):
         worker.proc.kill()
     assert all((tmp_path / n).stat().st_size > 10_000 for n in names)
     assert worker.dead and not figure_worker.running()
-    with figure_worker.batch():  # a new worker for the next batch
-        _figures(tmp_path, 1)
-    assert figure_worker.running() and figure_worker._worker is not worker
+    assert figure_worker.start() and figure_worker._worker is not worker  # a new one when asked
 
 
 def test_a_worker_that_hangs_is_stopped_and_its_figures_drawn_here(worker, tmp_path, monkeypatch):
@@ -83,6 +81,16 @@ def test_without_a_worker_figures_are_drawn_in_process(tmp_path, monkeypatch):
     with figure_worker.batch():
         names = _figures(tmp_path, 1)
         assert (tmp_path / names[0]).is_file()  # drawn at once, as without a batch
+    assert not figure_worker.running()
+
+
+def test_a_save_in_a_process_with_matplotlib_draws_in_process_unless_a_worker_runs(tmp_path):
+    import matplotlib  # noqa: F401  (as a notebook that plotted something)
+
+    figure_worker.stop()
+    with figure_worker.batch():
+        _figures(tmp_path, 1)
+        assert (tmp_path / "f0.png").is_file()  # drawn here, at once: no worker to wait for
     assert not figure_worker.running()
 
 

@@ -249,12 +249,14 @@ class Batch:
 
 @contextlib.contextmanager
 def batch():
-    """Inside: :func:`plots.figure` hands its figures to the worker (started if need be); at
-    the end every one of them is written. Nested: the outer batch collects them."""
+    """Inside: :func:`plots.figure` hands its figures to the worker; at the end every one of
+    them is written. Nested: the outer batch collects them. With no worker running, one is
+    started unless this process has matplotlib already (a batch waits for its figures, so a
+    worker started now only draws what this process would, after its own import)."""
     if getattr(_local, "batch", None) is not None:
         yield _local.batch
         return
-    b = Batch(_worker if start() else None)
+    b = Batch(_worker if running() or ("matplotlib" not in sys.modules and start()) else None)
     _local.batch = b
     try:
         yield b

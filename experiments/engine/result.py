@@ -145,7 +145,7 @@ class Run:
             The file names written: signals.csv, estimates.csv, estimates_NAME.csv of each
             offline observer, the study's data files, metrics.json, report.md, PNG figures.
             Every one exists on return (the figures are drawn by the process's figure worker,
-            :mod:`railfmu.experiments.engine.figure_worker`, started here if need be).
+            :mod:`railfmu.experiments.engine.figure_worker`, when one runs or starts).
         """
         from railfmu.experiments.engine.files import ensure_folder, write_atomic
 
