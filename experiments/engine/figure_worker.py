@@ -187,7 +187,7 @@ def start() -> bool:
             return False
         try:
             _worker = _Worker()
-        except (OSError, subprocess.SubprocessError):
+        except (OSError, ValueError, subprocess.SubprocessError):  # no interpreter to start, ...
             _worker = None
             return False
         return True
