@@ -104,9 +104,13 @@ def run(experiment: ExperimentRef, variant: str | None = None, *, parameters: Ma
     >>> r = railfmu.run("track_wheelset", seed=1, stop_time=2.0)   # doctest: +SKIP
     >>> r.metrics["observers"]["alignment"]["xi"]["rms_error"]     # doctest: +SKIP
     """
+    if out is not None:  # the figures' worker imports matplotlib while the run sets up and steps
+        from railfmu.experiments.engine.figure_worker import start
+
+        start()
     r = execute(experiment, variant, out, master, _sets(parameters), seed, stop_time, step_size,
                 progress=progress, log=log, verbose=verbose, fmi_version=fmi_version,
-                record_format=record_format, sampling=sampling)
+                record_format=record_format, sampling=sampling, figures=out is not None)
     if out is not None:
         r.save(out, log=log)
     return r

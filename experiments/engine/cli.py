@@ -112,6 +112,9 @@ def _log(args):
 
 
 def cmd_run(args) -> int:
+    from railfmu.experiments.engine import figure_worker
+
+    figure_worker.start()  # first: its matplotlib import runs on another core while the run sets up and steps
     from railfmu.experiments.engine.api import run
     from railfmu.experiments.engine.runner import find_experiment
 

@@ -9,16 +9,18 @@ from pathlib import Path
 from railfmu.models.errors import UserError
 
 
-def write_atomic(path: Path, text: str) -> None:
+def write_atomic(path: Path, data: str | bytes, sync: bool = True) -> None:
     """Write-then-rename: a reader, or a study resumed after kill -9, sees the old file or the
-    whole new one, never half of one."""
+    whole new one, never half of one. ``sync``: on disk before the rename (a file a resumed
+    study relies on), not only in the page cache."""
     path = Path(path)
     tmp = path.with_name(f".{path.name}.{os.getpid()}.part")
     try:
-        with open(tmp, "w") as f:
-            f.write(text)
-            f.flush()
-            os.fsync(f.fileno())
+        with open(tmp, "wb" if isinstance(data, bytes) else "w") as f:
+            f.write(data)
+            if sync:
+                f.flush()
+                os.fsync(f.fileno())
         os.replace(tmp, path)
     except OSError as exc:
         tmp.unlink(missing_ok=True)

@@ -19,16 +19,21 @@ from pathlib import Path
 
 import numpy as np
 
+from railfmu.experiments.engine.figure_png import (  # noqa: F401  (the figure boilerplate, here for the studies)
+    DPI,
+    LABELS_KEY,
+    legend_outside,
+    render,
+    save,
+    write_png,
+)
+
 # one curve: (label, values, unit) or (label, values, unit, matplotlib line style kwargs)
 Curve = tuple
-#: PNG text key holding the figure's axis labels (JSON)
-LABELS_KEY = "railfmu:axes"
 #: display units a label may ask for with ``[unit]``: (unit of the values, display unit) -> factor
 DISPLAY = {("m", "mm"): 1e3, ("m/s", "mm/s"): 1e3, ("m/s", "km/h"): 3.6, ("rad", "deg"): 180 / math.pi,
            ("rad/s", "deg/s"): 180 / math.pi, ("N/m", "kN/m"): 1e-3}
 NO_UNIT = ("-", "?", "", None)
-#: PNG resolution
-DPI = 110
 
 
 def _pyplot():
@@ -112,31 +117,6 @@ def _common_words(labels: list[str]) -> str:
     return " ".join(common).rstrip(",:")
 
 
-def _overlaps(a, b) -> bool:
-    return a.x0 < b.x1 and b.x0 < a.x1 and a.y0 < b.y1 and b.y0 < a.y1
-
-
-def save(fig, path: Path) -> None:
-    """Write ``fig`` as a PNG whose text chunk :data:`LABELS_KEY` holds, per axis, its title, x
-    and y labels, legend entries and whether the legend covers the axis (see
-    :func:`figure_labels`). The extents come from the canvas's renderer without a draw: the
-    figure is drawn once, by ``savefig``."""
-    fig.set_dpi(DPI)  # the renderer at the PNG's resolution, as savefig's own
-    renderer = fig.canvas.get_renderer()
-    axes = []
-    for ax in fig.axes:
-        leg = ax.get_legend()
-        axes.append({"title": ax.get_title(), "x": ax.get_xlabel(), "y": ax.get_ylabel(),
-                     "legend": [t.get_text() for t in leg.get_texts()] if leg else [],
-                     "legend_over_data": bool(leg and _overlaps(leg.get_window_extent(renderer),
-                                                                ax.get_window_extent(renderer)))})
-    # savefig's "tight" box from the same renderer, without the extra draw "tight" makes to find it
-    box = fig.get_tightbbox(renderer).padded(0.1)  # savefig.pad_inches
-    # zlib level 3: a third less time to encode than PIL's default 6, the same pixels in a file 10-20 % larger
-    fig.savefig(path, dpi=DPI, bbox_inches=box, metadata={LABELS_KEY: json.dumps(axes)},
-                pil_kwargs={"compress_level": 3})
-
-
 #: columns of a figure's curve envelope (:func:`envelope`): above the ~1100 pixel columns of the
 #: widest figure at 110 dpi, so the decimated curve draws the same pixels
 ENVELOPE_COLUMNS = 2000
@@ -174,47 +154,47 @@ def figure_labels(png: Path | str) -> list[dict]:
     return json.loads(text) if text else []
 
 
-def legend_outside(ax, columns: int = 1) -> None:
-    """The axis's legend to the right of it, off the data."""
-    ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0, ncol=columns)
-
-
 def figure(out: Path, fname: str, title: str, x: np.ndarray, x_label: str, axes: list[list[Curve]],
            height: float = 2.4, width: float = 9.0, legend_columns: int = 1,
            quantities: list[str | None] | None = None) -> str:
     """One PNG, one axis per list of curves sharing x; returns the file name. Every y-axis says
     ``quantity [unit]``: ``quantities[i]`` for axis i, else its one curve's label, else the
     words its curves' labels share (else all of them); an axis of several curves gets a legend
-    outside the data."""
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
-    from matplotlib.layout_engine import TightLayoutEngine
+    outside the data.
 
-    # a bare Agg figure: no pyplot (its import and figure manager) for a PNG
-    fig = Figure(figsize=(width, max(3.6, height * len(axes))))
-    FigureCanvasAgg(fig)
-    ax_grid = fig.subplots(len(axes), 1, sharex=True, squeeze=False)
-    for i, (ax, curves) in enumerate(zip(ax_grid[:, 0], axes)):
+    Inside a :func:`figure_worker.batch <railfmu.experiments.engine.figure_worker.batch>`
+    (``Run.save``) the figure worker draws it and the file exists when the batch ends; else
+    it is drawn here and exists on return."""
+    from railfmu.experiments.engine.figure_worker import current
+
+    spec = figure_spec(title, x, x_label, axes, height, width, legend_columns, quantities)
+    batch = current()
+    if batch is not None:
+        batch.submit(spec, out / fname)
+    else:
+        write_png(out / fname, render(spec))
+    return fname
+
+
+def figure_spec(title: str, x: np.ndarray, x_label: str, axes: list[list[Curve]], height: float = 2.4,
+                width: float = 9.0, legend_columns: int = 1, quantities: list[str | None] | None = None) -> dict:
+    """What :func:`render` draws, without matplotlib: the labels and each curve's display
+    envelope (a few thousand points however long the run: small to send to the worker)."""
+    spec_axes = []
+    for i, curves in enumerate(axes):
+        drawn = []
         for label, values, _, *style in curves:
             n = min(len(x), len(values))  # estimates may stop short of the signals
             xs, ys = envelope(np.asarray(x)[:n], np.asarray(values)[:n])
-            ax.plot(xs, ys, label=label, **({"lw": 0.8} | (style[0] if style else {})))
+            drawn.append((label, xs, ys, {"lw": 0.8} | (style[0] if style else {})))
         labels = [c[0] for c in curves]
         quantity = (quantities[i] if quantities and quantities[i] else None) or (
             labels[0] if len(labels) == 1 else _common_words(labels) or " / ".join(labels))
         # a sensor channel may be unitless ("-") where the physical signal beside it is not
         unit = next((c[2] for c in curves if c[2] not in NO_UNIT), curves[0][2])
-        ax.set_ylabel(f"{quantity} {unit_text(unit)}", fontsize=8)
-        if len(curves) > 1:
-            legend_outside(ax, legend_columns)
-        ax.grid(alpha=0.3)
-    ax_grid[0, 0].set_title(title)
-    ax_grid[-1, 0].set_xlabel(x_label)
-    # fig.tight_layout()'s layout, run once without leaving a layout engine on the figure (with one,
-    # savefig draws the figure twice)
-    TightLayoutEngine().execute(fig)
-    save(fig, out / fname)
-    return fname
+        spec_axes.append({"y_label": f"{quantity} {unit_text(unit)}", "legend": len(curves) > 1, "curves": drawn})
+    return {"title": title, "x_label": x_label, "size": (width, max(3.6, height * len(axes))),
+            "legend_columns": legend_columns, "axes": spec_axes}
 
 
 def plot_signals(spec: dict | None, signals: dict[str, np.ndarray], roles: dict, units: dict[str, str], out: Path,

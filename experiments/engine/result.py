@@ -61,7 +61,7 @@ class Run:
     def __init__(self, exp: Experiment, system: System, variant: str | None, master: str,
                  columns: list[str], data: np.ndarray, bank: ObserverBank, run_data: RunData,
                  series: dict[str, np.ndarray] | None = None, streamed: Path | None = None,
-                 record_format: str = "csv"):
+                 record_format: str = "csv", ahead: tuple | None = None):
         self.experiment: str = exp.name
         self.variant = variant
         self.master = master
@@ -74,6 +74,7 @@ class Run:
         self._streamed = streamed  # the folder signals.csv and estimates.csv were written to while running
         self.record_format = record_format  # the format they were streamed in
         self._plots: list[str] = []
+        self._ahead = ahead  # (batch, file names): the engine's figures, in the worker since the stepping ended
 
     def __repr__(self) -> str:
         n = len(self.signals.get("time", ()))
@@ -143,6 +144,8 @@ class Run:
         list of str
             The file names written: signals.csv, estimates.csv, estimates_NAME.csv of each
             offline observer, the study's data files, metrics.json, report.md, PNG figures.
+            Every one exists on return (the figures are drawn by the process's figure worker,
+            :mod:`railfmu.experiments.engine.figure_worker`, when one runs or starts).
         """
         from railfmu.experiments.engine.files import ensure_folder, write_atomic
 
@@ -161,17 +164,17 @@ class Run:
         data = RunData(rd.signals, rd.estimates, base, rd.roles, rd.observers)
         files = exp.study.files(data, out)
 
-        from railfmu.experiments.engine.plots import columns_of, plot_estimates, plot_signals, units_of
+        from railfmu.experiments.engine.figure_worker import batch
 
-        roles = rd.roles
-        position = roles.get(exp.study.x_axis) if exp.study.x_axis != "time" else None
-        if position is not None and position not in rd.signals:  # a speed setting: distance = V t
-            position = float(position)
-        units, columns = units_of(system), columns_of(system)
-        self._plots = (plot_signals(exp.study.figures_of_signals, rd.signals, roles, units, out, position, columns)
-                       + plot_estimates(bank, rd.signals, units, out, position, columns, exp.study.quantities)
-                       + exp.study.figures(RunData(rd.signals, rd.estimates, base, roles, rd.observers), out))
-        write_atomic(out / "report.md", self.report())
+        with batch() as figures:  # the figure worker draws them while the report is written; all written at the end
+            if self._ahead is not None:  # handed to the worker as the run ended (figures_ahead)
+                (early, engine), self._ahead = self._ahead, None
+                figures.take(early, out)
+            else:
+                engine = engine_figures(exp, system, rd.signals, rd.roles, bank, out)
+            self._plots = engine + exp.study.figures(RunData(rd.signals, rd.estimates, base, rd.roles, rd.observers),
+                                                     out)
+            write_atomic(out / "report.md", self.report())
         offline = [f"estimates_{name}.{fmt}" for name in bank.results]
         written = [f"signals.{fmt}", f"estimates.{fmt}", *offline, *files, "metrics.json", "report.md", *self._plots]
         if log is not None:
@@ -190,6 +193,33 @@ class Run:
         for name, (t_off, X) in bank.results.items():
             write_table(record_path(out, f"estimates_{name}", fmt), ["time", *(f"{name}.{o}" for o in outputs[name])],
                         np.column_stack([t_off, X]), fmt)
+
+
+def engine_figures(exp: Experiment, system: System, signals: dict[str, np.ndarray], roles: dict,
+                   bank: ObserverBank, out: Path) -> list[str]:
+    """The figures every run has: the study's signal figures and each observer's estimates
+    over their truth (:mod:`railfmu.experiments.engine.plots`)."""
+    from railfmu.experiments.engine.plots import columns_of, plot_estimates, plot_signals, units_of
+
+    position = roles.get(exp.study.x_axis) if exp.study.x_axis != "time" else None
+    if position is not None and position not in signals:  # a speed setting: distance = V t
+        position = float(position)
+    units, columns = units_of(system), columns_of(system)
+    return (plot_signals(exp.study.figures_of_signals, signals, roles, units, out, position, columns)
+            + plot_estimates(bank, signals, units, out, position, columns, exp.study.quantities))
+
+
+def figures_ahead(exp: Experiment, system: System, signals: dict[str, np.ndarray], roles: dict,
+                  bank: ObserverBank) -> tuple | None:
+    """:func:`engine_figures` handed to the running figure worker now (they need nothing the
+    study computes), for :meth:`Run.save` to write: the worker draws them while the study
+    scores the run. None when no worker runs."""
+    from railfmu.experiments.engine.figure_worker import ahead
+
+    with ahead() as early:
+        if early is None:
+            return None
+        return early, engine_figures(exp, system, signals, roles, bank, Path())
 
 
 def report_md(exp: Experiment, system: System, metrics: dict, plots: list[str]) -> str:

@@ -23,7 +23,7 @@ from railfmu.estimators.track.metrics import rms
 from railfmu.models.errors import UserError
 
 from railfmu.experiments.engine.files import check_seed, check_times, ensure_folder
-from railfmu.experiments.engine.result import Run, json_default as _json_default
+from railfmu.experiments.engine.result import Run, figures_ahead, json_default as _json_default
 from railfmu.experiments.engine.studies import HERE, Experiment, experiment_names, study_named, study_names
 from railfmu.experiments.engine.study_protocol import RunData, Study
 
@@ -111,7 +111,7 @@ def execute(name: str | Path, variant: str | None = None, out: Path | str | None
             stop_time: float | None = None, step_size: float | None = None, progress: bool = True,
             log: TextIO | None = sys.stderr, warn: Callable[[str], None] | None = None,
             series: bool = False, verbose: bool = False, fmi_version: int = 2,
-            record_format: str = "csv", sampling: str = "after-transfer") -> Run:
+            record_format: str = "csv", sampling: str = "after-transfer", figures: bool = False) -> Run:
     """Run one variant in memory and return the :class:`Run`. ``out``: stream signals.csv and
     estimates.csv into that folder as the run goes (an interrupted run keeps its complete
     rows); the other files are :meth:`Run.save`'s. ``log``: the progress lines (None: none);
@@ -121,7 +121,9 @@ def execute(name: str | Path, variant: str | None = None, out: Path | str | None
     ``fmi_version``: run railfmu's own FMUs as FMI 2.0 (default) or 3.0 builds; an SSP's
     packed FMUs run as they are. ``record_format``: csv, parquet or mat for the signals and
     estimates (:mod:`railfmu.experiments.engine.records`). ``sampling``: when the rows are
-    read (:func:`railfmu.fmus.cosim.masters.run`)."""
+    read (:func:`railfmu.fmus.cosim.masters.run`). ``figures``: the caller will
+    :meth:`Run.save` the run; a running figure worker draws the engine's figures while the
+    study scores the run (:func:`railfmu.experiments.engine.result.figures_ahead`)."""
     from railfmu.fmus.cosim.masters import MASTERS, SAMPLINGS, run
     from railfmu.experiments.engine import records
 
@@ -227,9 +229,15 @@ def execute(name: str | Path, variant: str | None = None, out: Path | str | None
         _unscore(metrics["observers"], system, system.replay.get("unscored", []))
     elif system.files:
         metrics["files"] = {k: {"path": p, "how": h} for k, (p, h) in system.files.items()}
+    ahead = figures_ahead(exp, system, signals, roles, bank) if figures else None
     t_study = time.perf_counter()
     data = RunData(signals, estimates, metrics, roles, observers)
-    metrics.update(exp.study.metrics(data))
+    try:
+        metrics.update(exp.study.metrics(data))
+    except BaseException:  # no Run will take the figures handed ahead: the worker's replies are not kept
+        if ahead is not None:
+            ahead[0].abandon()
+        raise
     from railfmu.experiments.engine.replay import learned_nothing
 
     for w in learned_nothing(metrics["observers"]):  # said in the heading's warnings, not only deep in the JSON
@@ -243,7 +251,7 @@ def execute(name: str | Path, variant: str | None = None, out: Path | str | None
         say(f"  timing: setup {setup_s:.2f} s, stepping {result.wall_time_s:.2f} s, study metrics "
             f"{metrics['timing_s']['study_metrics']:.2f} s")
     return Run(exp, system, variant, master, result.columns, result.data, bank, data, arrays, streamed=out,
-               record_format=record_format)
+               record_format=record_format, ahead=ahead)
 
 
 def _unscore(observers: dict, system, unscored: list[str]) -> None:
@@ -275,8 +283,12 @@ def run_experiment(name: str, variant: str | None = None, out: Path | str | None
     if write_files and out is None:
         exp = find_experiment(name)
         out = Path("out") / exp.name / (variant or exp.default_variant or "default")
+    if write_files:  # the figures' worker imports matplotlib while the run sets up and steps
+        from railfmu.experiments.engine.figure_worker import start
+
+        start()
     r = execute(name, variant, out if write_files else None, master, sets, seed, stop_time, step_size,
-                progress=progress, log=log, series=series)
+                progress=progress, log=log, series=series, figures=write_files)
     if write_files:
         r.save(out, log=log)
     return {**r.metrics, "series": r.series} if r.series else r.metrics
