@@ -115,3 +115,63 @@ def test_a_saved_run_lists_files_that_exist_and_the_engine_figures_come_ahead(fm
     for png in (f for f in written if f.endswith(".png")):
         assert (tmp_path / "a" / png).read_bytes() == (tmp_path / "b" / png).read_bytes(), png
     figure_worker.stop()
+
+
+class _Study:
+    """A study whose figures read only the run (``figures_from_run``), drawn by the worker."""
+
+    def __init__(self, fail: bool = False):
+        self.fail = fail
+
+    def figures(self, run, out):
+        if self.fail:
+            raise ValueError("no such band")
+        return [figure(out, "study.png", "study", run.signals["time"], "time [s]",
+                       [[("left rail", run.signals["y"], "mm")]])]
+
+
+def _run():
+    from railfmu.experiments.engine.study_protocol import RunData
+
+    return RunData({"time": T, "y": np.sin(T)}, {}, {}, {}, {})
+
+
+def test_a_studys_figures_drawn_by_the_worker_are_its_in_process_pngs(worker, tmp_path):
+    job = figure_worker.submit_study(_Study(), _run())
+    assert job is not None
+    pngs = figure_worker.study_pngs(job)
+    assert [name for name, _ in pngs] == ["study.png"]
+    assert _Study().figures(_run(), tmp_path) == ["study.png"]  # no batch open: drawn here
+    assert pngs[0][1] == (tmp_path / "study.png").read_bytes()
+
+
+def test_a_studys_figures_the_worker_cannot_draw_are_none_and_the_worker_lives_on(worker, tmp_path):
+    """None: the caller (Run.save) draws them itself, and raises the study's error there."""
+    assert figure_worker.study_pngs(figure_worker.submit_study(_Study(fail=True), _run())) is None
+    assert figure_worker.submit_study(lambda: None, _run()) is None  # a study that cannot travel
+    assert figure_worker.running()
+    with figure_worker.batch():
+        _figures(tmp_path, 1)
+    assert (tmp_path / "f0.png").is_file()
+
+
+def test_the_main_jobs_study_figures_come_from_the_worker_and_equal_in_process_ones(fmu_dir, tmp_path, monkeypatch):
+    """lateral_alignment draws its figures from the run alone: with a worker they are drawn
+    while the run is scored, byte for byte the PNGs drawn in-process without one."""
+    import railfmu
+
+    calls = []
+    from railfmu.experiments import lateral_alignment
+
+    original = lateral_alignment.LateralAlignment.figures
+    monkeypatch.setattr(lateral_alignment.LateralAlignment, "figures",
+                        lambda self, run, out: calls.append(out) or original(self, run, out))
+    figure_worker.stop()
+    railfmu.run("lateral_alignment", stop_time=2.0, out=tmp_path / "w")
+    assert calls == []  # not drawn in this process
+    figure_worker.stop()
+    monkeypatch.setenv(figure_worker.ENV, "0")
+    railfmu.run("lateral_alignment", stop_time=2.0, out=tmp_path / "here")
+    assert calls == [tmp_path / "here"]
+    for png in ("alignment.png", "alignment_bands.png"):
+        assert (tmp_path / "w" / png).read_bytes() == (tmp_path / "here" / png).read_bytes(), png

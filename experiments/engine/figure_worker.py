@@ -29,6 +29,8 @@ from __future__ import annotations
 import atexit
 import builtins
 import contextlib
+import dataclasses
+import importlib
 import json
 import os
 import pickle
@@ -88,7 +90,10 @@ class _Worker:
             if self.dead:
                 return None
             job, self.next_job = self.next_job, self.next_job + 1
-            data = memoryview(_frame(pickle.dumps((job, spec), protocol=pickle.HIGHEST_PROTOCOL)))
+            # the task pickled on its own: the worker reads the job's number even when the task
+            # does not load there (then it answers with the error at once)
+            task = pickle.dumps(spec, protocol=pickle.HIGHEST_PROTOCOL)
+            data = memoryview(_frame(pickle.dumps((job, task), protocol=pickle.HIGHEST_PROTOCOL)))
             try:
                 while data:
                     if not _ready(self.requests, select.POLLOUT, timeout):
@@ -303,6 +308,69 @@ def current() -> Batch | None:
     return getattr(_local, "batch", None)
 
 
+@dataclasses.dataclass
+class Imports:
+    """A task: import these modules now (a study's :attr:`figure_imports`, while the run steps)."""
+    modules: tuple[str, ...]
+
+
+@dataclasses.dataclass
+class StudyFigures:
+    """A task: ``study.figures(run, folder)`` drawn in the worker; the reply is each PNG's name
+    and bytes."""
+    study: object
+    run: object
+
+
+def prefetch(modules) -> None:
+    """Have the running worker import ``modules`` (nothing when none runs); no reply is kept."""
+    if modules and running():
+        job = _worker.send(Imports(tuple(modules)), TIMEOUT_S)
+        if job is not None:
+            _worker.drop([job])
+
+
+def submit_study(study, run) -> int | None:
+    """``study.figures(run, ...)`` handed to the running worker; its job number for
+    :func:`study_pngs`, or None when none runs (or ``run`` cannot be sent)."""
+    if not running():
+        return None
+    try:
+        return _worker.send(StudyFigures(study, run), TIMEOUT_S)
+    except (pickle.PicklingError, TypeError, AttributeError):  # a study or run that does not travel
+        return None
+
+
+def drop(jobs: list[int]) -> None:
+    """Replies to ``jobs`` that nobody will wait for: not kept when they come."""
+    if running():
+        _worker.drop(jobs)
+
+
+def study_pngs(job: int) -> list[tuple[str, bytes]] | None:
+    """The PNGs (name, bytes) of :func:`submit_study`'s job, in the order the study drew them;
+    None when the worker failed or died (the caller draws them itself). Warnings the worker
+    saw are raised here."""
+    if not running():
+        return None
+    ok, reply = _worker.wait([job], TIMEOUT_S).get(job, (False, None))
+    if not ok:
+        return None
+    pngs, said = reply
+    for category, message in said:
+        warnings.warn(message, getattr(builtins, category, UserWarning), stacklevel=2)
+    return pngs
+
+
+def _study_figures(task: StudyFigures) -> list[tuple[str, bytes]]:
+    """The worker's side of :class:`StudyFigures`: drawn into a folder of its own, read back."""
+    import tempfile
+
+    with tempfile.TemporaryDirectory(prefix="railfmu-figures-") as tmp:
+        names = task.study.figures(task.run, Path(tmp))
+        return [(name, (Path(tmp) / name).read_bytes()) for name in names]
+
+
 # --- the worker's side ---
 
 def serve(requests_fd: int, replies_fd: int) -> None:
@@ -340,10 +408,18 @@ def serve(requests_fd: int, replies_fd: int) -> None:
 
     warm_up()  # matplotlib's import and fonts, while the parent sets up and steps
     while (msg := inbox.get()) is not None:
-        job, spec = pickle.loads(msg)
+        job, task = pickle.loads(msg)
         try:
             with warnings.catch_warnings(record=True) as said:
-                png = render(spec)
+                spec = pickle.loads(task)  # a StudyFigures task imports the study's module here
+                if isinstance(spec, Imports):
+                    for name in spec.modules:
+                        importlib.import_module(name)
+                    png = None
+                elif isinstance(spec, StudyFigures):
+                    png = _study_figures(spec)
+                else:
+                    png = render(spec)
             reply = (job, True, (png, [(w.category.__name__, str(w.message)) for w in said]))
         except Exception as exc:  # noqa: BLE001 - the parent draws it again, and raises it there
             reply = (job, False, f"{type(exc).__name__}: {exc}")

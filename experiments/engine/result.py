@@ -167,19 +167,33 @@ class Run:
         from railfmu.experiments.engine.figure_worker import batch
 
         with batch() as figures:  # the figure worker draws them while the report is written; all written at the end
+            study_job = None
             if self._ahead is not None:  # handed to the worker as the run ended (figures_ahead)
-                (early, engine), self._ahead = self._ahead, None
+                (early, engine, study_job), self._ahead = self._ahead, None
                 figures.take(early, out)
             else:
                 engine = engine_figures(exp, system, rd.signals, rd.roles, bank, out)
-            self._plots = engine + exp.study.figures(RunData(rd.signals, rd.estimates, base, rd.roles, rd.observers),
-                                                     out)
+            self._plots = engine + self._study_figures(study_job, base, out)
             write_atomic(out / "report.md", self.report())
         offline = [f"estimates_{name}.{fmt}" for name in bank.results]
         written = [f"signals.{fmt}", f"estimates.{fmt}", *offline, *files, "metrics.json", "report.md", *self._plots]
         if log is not None:
             print(f"wrote {out}/: {', '.join(written)}", file=log)
         return written
+
+    def _study_figures(self, job: int | None, base: dict, out: Path) -> list[str]:
+        """The study's figures: the worker's PNGs of ``job`` (:func:`figures_ahead`) written into
+        ``out``, else drawn here (no job, or the worker failed: its error is then raised here)."""
+        from railfmu.experiments.engine.figure_png import write_png
+        from railfmu.experiments.engine.figure_worker import study_pngs
+
+        pngs = study_pngs(job) if job is not None else None
+        if pngs is None:
+            rd = self._run_data
+            return self._exp.study.figures(RunData(rd.signals, rd.estimates, base, rd.roles, rd.observers), out)
+        for name, png in pngs:
+            write_png(out / name, png)
+        return [name for name, _ in pngs]
 
     def _write_csvs(self, out: Path, fmt: str = "csv") -> None:
         """The signals and estimates from memory in ``fmt``, with the writer of a streamed run."""
@@ -209,17 +223,33 @@ def engine_figures(exp: Experiment, system: System, signals: dict[str, np.ndarra
             + plot_estimates(bank, signals, units, out, position, columns, exp.study.quantities))
 
 
-def figures_ahead(exp: Experiment, system: System, signals: dict[str, np.ndarray], roles: dict,
-                  bank: ObserverBank) -> tuple | None:
+def figures_ahead(exp: Experiment, system: System, run: RunData, bank: ObserverBank) -> tuple | None:
     """:func:`engine_figures` handed to the running figure worker now (they need nothing the
-    study computes), for :meth:`Run.save` to write: the worker draws them while the study
-    scores the run. None when no worker runs."""
-    from railfmu.experiments.engine.figure_worker import ahead
+    study computes), and the study's own when it draws them from the run alone
+    (``Study.figures_from_run``), for :meth:`Run.save` to write: the worker draws them while
+    the study scores the run. ``(batch, engine figure names, study job or None)``; None when
+    no worker runs."""
+    from railfmu.experiments.engine.figure_worker import ahead, submit_study
 
     with ahead() as early:
         if early is None:
             return None
-        return early, engine_figures(exp, system, signals, roles, bank, Path())
+        engine = engine_figures(exp, system, run.signals, run.roles, bank, Path())
+    job = None
+    if exp.study.figures_from_run:  # a copy of the run: the study's metrics add to the base later
+        job = submit_study(exp.study, RunData(run.signals, run.estimates, dict(run.base), run.roles, {}))
+    return early, engine, job
+
+
+def abandon_ahead(ahead: tuple | None) -> None:
+    """Figures handed ahead that no :meth:`Run.save` will take: their replies are not kept."""
+    if ahead is not None:
+        from railfmu.experiments.engine.figure_worker import drop
+
+        early, _, job = ahead
+        early.abandon()
+        if job is not None:
+            drop([job])
 
 
 def report_md(exp: Experiment, system: System, metrics: dict, plots: list[str]) -> str:

@@ -23,7 +23,7 @@ from railfmu.estimators.track.metrics import rms
 from railfmu.models.errors import UserError
 
 from railfmu.experiments.engine.files import check_seed, check_times, ensure_folder
-from railfmu.experiments.engine.result import Run, figures_ahead, json_default as _json_default
+from railfmu.experiments.engine.result import Run, abandon_ahead, figures_ahead, json_default as _json_default
 from railfmu.experiments.engine.studies import HERE, Experiment, experiment_names, study_named, study_names
 from railfmu.experiments.engine.study_protocol import RunData, Study
 
@@ -142,6 +142,10 @@ def execute(name: str | Path, variant: str | None = None, out: Path | str | None
         raise UserError(f"--sampling {sampling}: only the Jacobi master reads its rows before the transfer "
                         f"(the {master} master samples after it); use --master jacobi")
     exp = find_experiment(name)
+    if figures and exp.study.figures_from_run:  # the figure worker imports them while the run steps
+        from railfmu.experiments.engine.figure_worker import prefetch
+
+        prefetch((*exp.study.figure_imports, type(exp.study).__module__))
     variant = variant or exp.default_variant
     out = Path(out) if out is not None else None
     if out is not None and out.exists() and not out.is_dir():
@@ -229,14 +233,13 @@ def execute(name: str | Path, variant: str | None = None, out: Path | str | None
         _unscore(metrics["observers"], system, system.replay.get("unscored", []))
     elif system.files:
         metrics["files"] = {k: {"path": p, "how": h} for k, (p, h) in system.files.items()}
-    ahead = figures_ahead(exp, system, signals, roles, bank) if figures else None
-    t_study = time.perf_counter()
     data = RunData(signals, estimates, metrics, roles, observers)
+    ahead = figures_ahead(exp, system, data, bank) if figures else None
+    t_study = time.perf_counter()
     try:
         metrics.update(exp.study.metrics(data))
     except BaseException:  # no Run will take the figures handed ahead: the worker's replies are not kept
-        if ahead is not None:
-            ahead[0].abandon()
+        abandon_ahead(ahead)
         raise
     from railfmu.experiments.engine.replay import learned_nothing
 

@@ -140,6 +140,12 @@ class Study:
     replay_checks: tuple = ()
     #: flattened metric names (fnmatch patterns) that the Monte Carlo table.md shows
     summary_metrics: tuple[str, ...] = ("observers.*.rms_error", "wall_time_s")
+    #: True when :meth:`figures` reads only the run (signals, estimates, roles, the base metrics;
+    #: not the study's own metrics, not ``run.observers``): a figure worker then draws them while
+    #: :meth:`metrics` scores the run, from a copy of the run
+    figures_from_run: bool = False
+    #: modules :meth:`figures` imports, which a figure worker imports while the run steps
+    figure_imports: tuple[str, ...] = ()
 
     def __init__(self, description: str = ""):
         self.description = description

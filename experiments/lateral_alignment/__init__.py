@@ -155,6 +155,8 @@ class LateralAlignment(Study):
     figures_of_signals = PLOTS
     x_axis = "position"
     summary_metrics = ("J_mm.*", "J_rel.*", "J_mm_smoothed.*", "J_rel_smoothed.*", "estimator_seconds")
+    figures_from_run = True  # the band-passed curves need no score: drawn while the run is scored
+    figure_imports = ("scipy.signal", "railfmu.estimators.track.metrics")
 
     def monte_carlo_stop_time(self, system) -> float:
         """Record length (s) of a Monte Carlo member: the run-in plus
