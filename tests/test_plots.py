@@ -105,3 +105,17 @@ def test_a_long_curve_is_drawn_from_its_own_extremes():
         assert ys[inside].max() == y[c:c + k].max() and ys[inside].min() == y[c:c + k].min()
     short = np.arange(50.0)
     assert envelope(short, short)[1] is short
+
+
+def test_a_long_y_label_is_wrapped_to_the_axis_height(tmp_path):
+    """A y label longer than its axis is high would run into the next axis's: it is broken
+    into lines of at most height x Y_LABEL_CHARS_PER_INCH characters, none of its words lost."""
+    from railfmu.experiments.engine.plots import Y_LABEL_CHARS_PER_INCH, figure, figure_labels
+
+    t = np.linspace(0.0, 1.0, 100)
+    long = "driver's regime (0 standstill .. 4 braking, 5 emergency braking)"
+    name = figure(tmp_path, "long.png", "long label", t, "time [s]", [[(long, t, "-")], [("speed", t, "m/s")]])
+    first, second = (a["y"] for a in figure_labels(tmp_path / name))
+    lines = first.split("\n")
+    assert len(lines) >= 2 and all(len(line) <= 2.4 * Y_LABEL_CHARS_PER_INCH for line in lines)
+    assert " ".join(lines).startswith(long) and second == "speed [m/s]"

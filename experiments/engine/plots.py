@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import json
 import math
+import textwrap
 from pathlib import Path
 
 import numpy as np
@@ -176,6 +177,11 @@ def figure(out: Path, fname: str, title: str, x: np.ndarray, x_label: str, axes:
     return fname
 
 
+#: characters of an 8 pt y label per inch of axis height (DejaVu Sans averages ~4.5 pt a
+#: character; some room left for the axes' gap)
+Y_LABEL_CHARS_PER_INCH = 14
+
+
 def figure_spec(title: str, x: np.ndarray, x_label: str, axes: list[list[Curve]], height: float = 2.4,
                 width: float = 9.0, legend_columns: int = 1, quantities: list[str | None] | None = None) -> dict:
     """What :func:`render` draws, without matplotlib: the labels and each curve's display
@@ -192,7 +198,10 @@ def figure_spec(title: str, x: np.ndarray, x_label: str, axes: list[list[Curve]]
             labels[0] if len(labels) == 1 else _common_words(labels) or " / ".join(labels))
         # a sensor channel may be unitless ("-") where the physical signal beside it is not
         unit = next((c[2] for c in curves if c[2] not in NO_UNIT), curves[0][2])
-        spec_axes.append({"y_label": f"{quantity} {unit_text(unit)}", "legend": len(curves) > 1, "curves": drawn})
+        # on lines no longer than the axis is high: a longer label runs into its neighbours'
+        y_label = textwrap.fill(f"{quantity} {unit_text(unit)}", width=max(12, int(height * Y_LABEL_CHARS_PER_INCH)),
+                                break_on_hyphens=False)
+        spec_axes.append({"y_label": y_label, "legend": len(curves) > 1, "curves": drawn})
     return {"title": title, "x_label": x_label, "size": (width, max(3.6, height * len(axes))),
             "legend_columns": legend_columns, "axes": spec_axes}
 

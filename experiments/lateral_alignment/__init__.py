@@ -79,9 +79,11 @@ ROLES = {  # where the SSD holds what the study reads
 
 PLOTS = {  # Muñoz et al., Fig. 4: the three sensor signals (roles or signal names)
     "sensors.png": ("Sensor signals (Muñoz et al., Fig. 4)",
-                    [[("ddy", "axle-box lateral acc. (noisy)"), ("vehicle.ddy_w1", "noise-free")],
-                     [("dpsi", "wheelset yaw rate (noisy)"), ("vehicle.dpsi_w1", "noise-free")],
-                     [("ddy_f", "bogie-frame lateral acc. (noisy)"), ("vehicle.ddy_b1", "noise-free")]]),
+                    [["axle-box lateral acc.", ("ddy", "axle-box lateral acc. (noisy)"),
+                      ("vehicle.ddy_w1", "noise-free")],
+                     ["wheelset yaw rate", ("dpsi", "wheelset yaw rate (noisy)"), ("vehicle.dpsi_w1", "noise-free")],
+                     ["bogie-frame lateral acc.", ("ddy_f", "bogie-frame lateral acc. (noisy)"),
+                      ("vehicle.ddy_b1", "noise-free")]]),
 }
 
 

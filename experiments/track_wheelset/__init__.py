@@ -13,7 +13,7 @@ DEFAULT_VARIANT = "psd"
 ROLES = {"alignment": truth("alignment", "xi"), "wheelset_y": output("wheelset", "y")}
 PLOTS = {  # file -> (title, one list of (signal, label) per axis)
     "track_input.png": ("Alignment under the leading wheelset and the response",
-                        [[("track.alignment_1", "alignment xi"), ("wheelset.y", "wheelset y"),
+                        [["lateral position", ("track.alignment_1", "alignment xi"), ("wheelset.y", "wheelset y"),
                           ("wheelset.y_f", "frame y_f")],
                          [("wheelset.psi", "wheelset yaw psi")]]),
     "sensors.png": ("Sensor signals (noise-free)",
