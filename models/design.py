@@ -20,6 +20,7 @@ import hashlib
 import importlib
 import importlib.util
 import json
+import zipfile
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Mapping, Sequence
@@ -158,7 +159,7 @@ class DesignModel:
             try:
                 with np.load(path) as z:
                     mats = tuple(z[n] for n in "ABCD")
-            except (OSError, KeyError, ValueError):
+            except (OSError, KeyError, ValueError, EOFError, zipfile.BadZipFile):  # none yet, or a damaged file
                 mats = self.model().linearize(pv, uv)
                 write_atomic(path, lambda f: np.savez(f, **dict(zip("ABCD", mats))))
             self._memo[key] = mats

@@ -65,3 +65,17 @@ def test_an_alignment_filter_with_its_design_cached_imports_no_sympy(tmp_path):
     assert first[0] == "['railfmu.models.base', 'sympy']"  # a miss: the model built once
     assert second[0] == "[]"
     assert first[1] == second[1]  # the same gain bit for bit
+
+
+def test_a_damaged_cache_entry_is_derived_again(tmp_path, monkeypatch):
+    """A linearisation file cut short (a full disk, a copied cache) is no crash: the model
+    derives it again, bit for bit."""
+    from railfmu.models.design import DesignModel
+
+    monkeypatch.setenv("RAILFMU_CACHE", str(tmp_path))
+    first = DesignModel("railfmu.models.vehicle.wheelset", "WHEELSET").linearize()
+    for f in (tmp_path / "design").glob("*.npz"):
+        f.write_bytes(f.read_bytes()[:100])
+    again = DesignModel("railfmu.models.vehicle.wheelset", "WHEELSET").linearize()
+    for a, b in zip(first, again):
+        np.testing.assert_array_equal(a, b)
