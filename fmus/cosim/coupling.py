@@ -232,6 +232,22 @@ def _links(conns: list[Connection], fmus: dict[str, _Fmu]) -> list[_Link]:
     return out
 
 
+def signal_runs(system: System, record: list[str], fmus: dict[str, _Fmu]) -> list[tuple[_Fmu, str, list[int], list[int]]]:
+    """The recorded signals as runs of consecutive columns (from 1) of one FMU and carried type,
+    one get each: ``(fmu, type, value references, columns)``."""
+    runs: list[tuple[_Fmu, str, list[int], list[int]]] = []
+    for col, signal in enumerate(record, start=1):
+        comp, v = system.signal(signal, "recorded signal")
+        fmu = fmus[comp.name]
+        t = "Enumeration" if fmu.version == 3 and v.type == "Enumeration" else carried_type(v.type)
+        if runs and runs[-1][0] is fmu and runs[-1][1] == t and runs[-1][3][-1] == col - 1:
+            runs[-1][2].append(v.valueReference)
+            runs[-1][3].append(col)
+        else:
+            runs.append((fmu, t, [v.valueReference], [col]))
+    return runs
+
+
 class _Sampler:
     """Reads the recorded signals into row k of ``data``: one fmi2Get* per run of consecutive
     columns of the same FMU and type; Real values written straight into the array."""
@@ -240,16 +256,7 @@ class _Sampler:
         self.data = data
         self.row_bytes = data.strides[0]
         self.base = data.ctypes.data
-        runs: list[tuple[_Fmu, str, list[int], list[int]]] = []
-        for col, signal in enumerate(record, start=1):
-            comp, v = system.signal(signal, "recorded signal")
-            fmu = fmus[comp.name]
-            t = "Enumeration" if fmu.version == 3 and v.type == "Enumeration" else carried_type(v.type)
-            if runs and runs[-1][0] is fmu and runs[-1][1] == t and runs[-1][3][-1] == col - 1:
-                runs[-1][2].append(v.valueReference)
-                runs[-1][3].append(col)
-            else:
-                runs.append((fmu, t, [v.valueReference], [col]))
+        runs = signal_runs(system, record, fmus)
         self.runs = [(f, f.get[t], (ctypes.c_uint * len(vrs))(*vrs), len(vrs), cols[0] * 8,
                       None if t == "Real" else ((f.ctype[t] * len(vrs))(), slice(cols[0], cols[-1] + 1),
                                                 t == "Boolean"))

@@ -45,9 +45,10 @@ from railfmu.fmus.cosim.coupling import (
     _row_buffer,
     _Terminated,
     fmu_stop_time,
+    signal_runs,
 )
 from railfmu.fmus.cosim.slave import Slave, Status
-from railfmu.fmus.cosim.system import Sink, System, carried_type, check_system, recorded_signals
+from railfmu.fmus.cosim.system import Sink, System, check_system, recorded_signals
 
 LOOP_SOURCE = Path(__file__).parent.parent / "native" / "host" / "coupling_loop.c"
 NOTE = ("container master: the FMUs coupled like Jacobi by a C loop over their own fmi2 functions "
@@ -115,20 +116,6 @@ def _address(fn) -> int:
     return ctypes.cast(fn, ctypes.c_void_p).value
 
 
-def _runs(system: System, record: list[str], fmus: dict[str, _Fmu]) -> list[tuple[_Fmu, str, list[int], list[int]]]:
-    """The recorded signals as runs of consecutive columns of one FMU and type (one get each)."""
-    runs: list[tuple[_Fmu, str, list[int], list[int]]] = []
-    for col, signal in enumerate(record, start=1):
-        comp, v = system.signal(signal, "recorded signal")
-        f, t = fmus[comp.name], carried_type(v.type)
-        if runs and runs[-1][0] is f and runs[-1][1] == t and runs[-1][3][-1] == col - 1:
-            runs[-1][2].append(v.valueReference)
-            runs[-1][3].append(col)
-        else:
-            runs.append((f, t, [v.valueReference], [col]))
-    return runs
-
-
 def run_native(system: System, sinks: Sequence[Sink], progress: bool) -> RunResult | None:
     """The container master on ``system`` (:func:`takes` it): see the module docstring. None
     when the loop cannot be compiled (no C compiler)."""
@@ -174,7 +161,7 @@ def run_native(system: System, sinks: Sequence[Sink], progress: bool) -> RunResu
             lc.map_index = arr(ctypes.c_size_t, [i for i, _, _ in link.maps])
             lc.factor = arr(ctypes.c_double, [float(a) for _, a, _ in link.maps])
             lc.offset = arr(ctypes.c_double, [float(b) for _, _, b in link.maps])
-        runs = _runs(system, record, fmus)
+        runs = signal_runs(system, record, fmus)
         run_c = (_Run * max(len(runs), 1))()
         for rc, (f, t, vrs, cols) in zip(run_c, runs):
             rc.get, rc.instance, rc.vrs, rc.n = _address(f.get[t]), f.c.value, arr(ctypes.c_uint, vrs), len(vrs)
